@@ -1,0 +1,3 @@
+from windbench.cli import main
+
+main()

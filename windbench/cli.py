@@ -1,0 +1,63 @@
+"""Command line: ``windbench [overrides]`` (one run) and ``windbench -m ...`` (a sweep).
+
+Bad input prints one line ``windbench: error: <key>: <what is allowed>`` and exits with
+status 2 before anything is written; a run that blows up writes its dataset with
+``status = failed`` and exits with status 1 (in a sweep the other runs go on).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+from omegaconf import DictConfig
+
+from windbench.config import register_configs
+from windbench.errors import ConfigError
+
+CONFIG_DIR = str(Path(__file__).resolve().parent.parent / "conf")
+log = logging.getLogger("windbench")
+
+register_configs()
+
+
+def _task(cfg: DictConfig) -> str:
+    from windbench.simulate import run
+
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    multirun = HydraConfig.get().mode == RunMode.MULTIRUN
+    try:
+        result = run(cfg, out_dir)
+    except ConfigError as err:
+        print(f"windbench: error: {err}", file=sys.stderr)
+        if multirun:
+            return "invalid"
+        sys.exit(2)
+    if result.status == "failed":
+        print(f"windbench: run failed: {result.failure} (dataset: {result.path})", file=sys.stderr)
+        if not multirun:
+            sys.exit(1)
+    else:
+        log.info("wrote %s", result.path)
+    return result.status
+
+
+@hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="config")
+def _app(cfg: DictConfig) -> str:
+    return _task(cfg)
+
+
+def main() -> None:
+    _app()
+
+
+def compose_config(overrides: list[str] | None = None) -> DictConfig:
+    """The resolved config for ``overrides``, without running anything (tests, notebooks)."""
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(version_base="1.3", config_dir=CONFIG_DIR):
+        return compose(config_name="config", overrides=overrides or [])

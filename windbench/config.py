@@ -1,0 +1,126 @@
+"""Structured configs: the schema Hydra checks every run against (types and known keys).
+
+The ConfigStore holds ``windbench_schema`` (the root) and one schema per wind backend in
+group ``wind`` (``<backend>_schema``); each ``conf/wind/<backend>.yaml`` starts from its
+schema, so a wrong type or an unknown key fails at composition, before any work.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+
+@dataclass
+class DomainConfig:
+    min: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    max: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
+
+
+@dataclass
+class BoundaryConfig:
+    x_min: str = "inflow"
+    x_max: str = "outflow"
+    y_min: str = "slip"
+    y_max: str = "slip"
+    z_min: str = "no_slip"
+    z_max: str = "slip"
+
+
+@dataclass
+class ProbeBoxConfig:
+    min: list[float] = MISSING
+    max: list[float] = MISSING
+
+
+@dataclass
+class LeeForceConfig:
+    sheltered: str = MISSING
+    exposed: str = MISSING
+
+
+@dataclass
+class SceneConfig:
+    name: str = MISSING
+    domain: DomainConfig = field(default_factory=DomainConfig)
+    boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
+    wall_velocity: dict[str, list[float]] = field(default_factory=dict)
+    sources: list[Any] = field(default_factory=list)
+    bodies: list[Any] = field(default_factory=list)
+    cloths: list[Any] = field(default_factory=list)
+    probes: dict[str, ProbeBoxConfig] = field(default_factory=dict)
+    lee_force: LeeForceConfig | None = None
+    reference_speed: float | None = None
+
+
+@dataclass
+class WindConfig:
+    """Keys every backend has; backends subclass this with their own."""
+
+    name: str = MISSING
+
+
+@dataclass
+class GlobalWindConfig(WindConfig):
+    name: str = "global"
+
+
+@dataclass
+class GridConfig:
+    resolution: int = 32  # cells along the longest domain axis
+
+
+@dataclass
+class SimConfig:
+    dt: float = 1.0 / 60.0  # s
+    duration: float = 1.0  # s of simulated time
+    progress: bool = True  # tqdm bar (only on a terminal)
+
+
+@dataclass
+class AeroConfig:
+    """Paper §3 coefficients; C_D = 1.17 is Hoerner's square plate normal to the flow."""
+
+    drag_coefficient: float = 1.17
+    lift_coefficient: float = 0.6
+    air_density: float = 1.2
+
+
+@dataclass
+class ClothConfig:
+    solver: str = "static"  # see windbench.cloth.SOLVERS
+
+
+@dataclass
+class OutputConfig:
+    snapshots: int = 4  # wind snapshots kept (evenly spaced, last one at the end)
+    probe_points: int = 6  # lee/free-stream probe lattice: points per axis
+    filename: str = "windbench.nc"
+
+
+@dataclass
+class WindbenchConfig:
+    wind: Any = MISSING
+    scene: SceneConfig = MISSING
+    grid: GridConfig = field(default_factory=GridConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    aero: AeroConfig = field(default_factory=AeroConfig)
+    cloth: ClothConfig = field(default_factory=ClothConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+    seed: int = 0
+    resume: bool = False
+    experiment: str | None = None
+
+
+WIND_SCHEMAS: dict[str, type] = {"global": GlobalWindConfig}
+
+
+def register_configs() -> None:
+    cs = ConfigStore.instance()
+    cs.store(name="windbench_schema", node=WindbenchConfig)
+    cs.store(group="scene", name="scene_schema", node=SceneConfig)
+    for backend, schema in WIND_SCHEMAS.items():
+        cs.store(group="wind", name=f"{backend}_schema", node=schema)

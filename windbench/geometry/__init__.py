@@ -1,0 +1,1 @@
+"""Rigid bodies, triangle rasterisation into grid cells, segment/triangle intersection."""

@@ -1,0 +1,74 @@
+"""The WindField interface: the only thing the step loop knows about a wind backend.
+
+- ``WindField(scene, grid, params)`` — built by :func:`windbench.wind.make_wind` from the
+  ``wind`` config group.
+- ``step(dt, obstacles)`` — advance the air by ``dt``; ``obstacles`` carries the rigid
+  bodies and the current cloth triangles (positions, velocities).
+- ``sample(points) -> (n, 3)`` — wind velocity (m/s) at world points.
+- ``velocity() -> (nx, ny, nz, 3)`` — cell-centred wind on the grid.
+- ``stats() -> dict`` — scalar figures of the last step (recorded per time step).
+- ``solid_mask() -> (nx, ny, nz) bool`` — cells that are not air (inside rigid bodies).
+
+Model (scene, grid, params: fixed) is kept apart from state (arrays that change).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from windbench.geometry.bodies import Body, inside
+from windbench.grid import Grid
+
+
+@dataclass(frozen=True)
+class Obstacles:
+    """What the air must react to this step: rigid bodies and the current cloth.
+
+    Cloth arrays are all cloths concatenated: ``cloth_positions``/``cloth_velocities``
+    ``(n, 3)``, ``cloth_triangles`` ``(m, 3)`` indexing them.
+    """
+
+    bodies: tuple[Body, ...]
+    cloth_positions: np.ndarray
+    cloth_velocities: np.ndarray
+    cloth_triangles: np.ndarray
+
+    @classmethod
+    def rigid_only(cls, bodies) -> Obstacles:
+        return cls(tuple(bodies), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+
+
+class WindField(ABC):
+    """Base class of the wind backends (see module docstring)."""
+
+    name: ClassVar[str] = ""
+
+    def __init__(self, scene, grid: Grid, params: Any):
+        self.scene = scene
+        self.grid = grid
+        self.params = params
+        self._solid = inside(scene.bodies, grid.cell_centres().reshape(-1, 3)).reshape(grid.shape)
+
+    @abstractmethod
+    def step(self, dt: float, obstacles: Obstacles) -> None:
+        """Advance the air by ``dt`` seconds."""
+
+    @abstractmethod
+    def velocity(self) -> np.ndarray:
+        """Cell-centred wind, ``(nx, ny, nz, 3)`` in m/s."""
+
+    def sample(self, points) -> np.ndarray:
+        """Wind at world points ``(n, 3)``: trilinear in the cell-centred field."""
+        return self.grid.sample(self.velocity(), points)
+
+    def stats(self) -> dict[str, float]:
+        """Backend figures of the last step (e.g. pressure iterations)."""
+        return {}
+
+    def solid_mask(self) -> np.ndarray:
+        """Cells whose centre lies inside a rigid body."""
+        return self._solid
