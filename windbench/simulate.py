@@ -126,12 +126,17 @@ class Recorder:
         self.setup = setup
         self.times: list[float] = []
         self.rows: dict[str, list] = {}
+        self.phases: dict[str, list[float]] = {}
         self.snap_times: list[float] = []
         self.snap_wind: list[np.ndarray] = []
         self.snap_probe: list[np.ndarray] = []
 
     def add(self, name: str, value):
         self.rows.setdefault(name, []).append(value)
+
+    def add_phase(self, phase: str, seconds: float):
+        """A backend's sub-phase time (``stats()`` keys ending in ``_seconds``)."""
+        self.phases.setdefault(phase, []).append(seconds)
 
     def snapshot(self, t: float, wind: np.ndarray, probe_wind: np.ndarray):
         self.snap_times.append(t)
@@ -150,7 +155,6 @@ class Recorder:
                     np.asarray(self.times, dtype=float),
                     {"units": "s", "long_name": "simulated time"},
                 ),
-                "phase": ("phase", list(PHASES)),
                 "component": ("component", comp),
                 "x": ("x", x, {"units": "m"}),
                 "y": ("y", y, {"units": "m"}),
@@ -168,9 +172,13 @@ class Recorder:
             ("snapshot", "x", "y", "z", "component"),
             np.asarray(self.snap_wind).reshape(shape_w),
         )
+        phases = list(PHASES) + sorted(self.phases)
+        seconds = np.asarray(self.rows.get("step_seconds", []), dtype=float).reshape(n, len(PHASES))
+        extra = [np.asarray(self.phases[p][:n], dtype=float) for p in sorted(self.phases)]
+        ds = ds.assign_coords(phase=("phase", phases))
         ds["step_seconds"] = (
             ("time", "phase"),
-            np.asarray(self.rows.get("step_seconds", []), dtype=float).reshape(n, len(PHASES)),
+            np.column_stack([seconds, *extra]) if extra else seconds,
         )
         ds["aero_force"] = (
             ("time", "cloth", "component"),
@@ -279,7 +287,10 @@ class Simulation:
             shel, expo = (s.scene.cloth_index(c) for c in s.scene.lee_force)
             rec.add("lee_force_ratio", metrics.force_ratio(forces[shel], forces[expo]))
         for key, value in {**self.wind.stats(), **self.cloth_solver.stats(self.state)}.items():
-            rec.add(key, float(value))
+            if key.endswith("_seconds"):  # a backend's own phase, e.g. advect_seconds
+                rec.add_phase(key.removesuffix("_seconds"), float(value))
+            else:
+                rec.add(key, float(value))
         if n + 1 in s.snapshot_steps:
             pts = sorted(probe_wind)
             rec.snapshot(
