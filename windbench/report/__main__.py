@@ -1,0 +1,5 @@
+import sys
+
+from windbench.report.cli import main
+
+sys.exit(main())

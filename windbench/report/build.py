@@ -1,0 +1,294 @@
+"""Run or sweep folders -> ``results.nc``, ``summary.csv``, figures, ``report.md``, ``index.html``.
+
+:func:`build_report` is what ``windbench-report`` runs; see :mod:`windbench.report` for the
+layout of the output folder.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from windbench.aero import AeroParams
+from windbench.config import AeroConfig
+from windbench.dataset import write_atomic
+from windbench.report import figures as F
+from windbench.report.collect import (
+    AVERAGE_FROM,
+    RunRecord,
+    combine,
+    find_runs,
+    mark_duplicates,
+    read_runs,
+    summary_frame,
+    swept_keys,
+)
+from windbench.report.document import FigureRef, Note, Section, Table, Text, to_html, to_markdown
+from windbench.report.lee import assign_lee_errors, choose_references
+
+PAPER_COMMAND = "windbench -m experiment=paper"
+
+
+@dataclass
+class Report:
+    out: Path
+    records: list[RunRecord]
+    summary: pd.DataFrame
+    references: dict[str, RunRecord]
+    drawn: list[str] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)
+    exported: list[Path] = field(default_factory=list)
+
+    @property
+    def skipped(self) -> list[RunRecord]:
+        return [r for r in self.records if r.status != "complete"]
+
+
+def sweep_name(records: Sequence[RunRecord], inputs: Sequence) -> str:
+    """The runs' common ``experiment`` attribute, else the first input folder's name."""
+    names = {r.experiment for r in records if r.experiment}
+    if len(names) == 1:
+        return names.pop()
+    return Path(inputs[0]).resolve().name or "report"
+
+
+def _aero_params(records: Sequence[RunRecord]) -> tuple[AeroParams, str]:
+    for r in records:
+        if r.status == "complete" and "aero.drag_coefficient" in r.config:
+            p = AeroParams(
+                drag_coefficient=float(r.config["aero.drag_coefficient"]),
+                lift_coefficient=float(r.config["aero.lift_coefficient"]),
+                air_density=float(r.config.get("aero.air_density", 1.2)),
+            )
+            return p, f"as in run {r.label}"
+    d = AeroConfig()
+    return AeroParams(d.drag_coefficient, d.lift_coefficient, d.air_density), "windbench defaults"
+
+
+def _reference_note(refs: dict[str, RunRecord], reference_dir) -> str:
+    if not refs:
+        return (
+            "No reference: no `navier_stokes` run among the inputs"
+            + (f" and none readable under `{reference_dir}`" if reference_dir else "")
+            + ", so `lee_error` is empty."
+        )
+    src = f"the finest run under `--reference {reference_dir}`" if reference_dir else (
+        "the finest `navier_stokes` run of the scene among the inputs"
+    )
+    return f"Reference for `lee_error`: {src}."
+
+
+def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Per scene, backend and resolution: runtime, lee error, divergence, force ratio."""
+    if df.empty:
+        return df
+    cols = {
+        "seconds_per_step": "ms/step",
+        "lee_error": "lee error",
+        "divergence_rms": "divergence rms",
+        "lee_force_ratio": "lee force ratio",
+        "lee_speed_ratio": "lee speed ratio",
+    }
+    d = df.copy()
+    d["seconds_per_step"] = d["seconds_per_step"] * 1e3
+    g = d.groupby(["scene", "wind", "resolution"], sort=True)
+    out = g[list(cols)].mean().rename(columns=cols)
+    out.insert(0, "runs", g.size())
+    out.insert(1, "cells", g["grid_cells"].first())
+    return out.reset_index()
+
+
+def _run_table(df: pd.DataFrame, dims: list[str]) -> pd.DataFrame:
+    cols = [
+        *dims,
+        "status",
+        "seconds_per_step",
+        "lee_speed_ratio",
+        "lee_force_ratio",
+        "lee_error",
+        "divergence_rms",
+        "failure",
+    ]
+    return df[[c for c in cols if c in df]]
+
+
+def build_report(
+    inputs: Sequence,
+    out: Path | None = None,
+    reference: Path | None = None,
+    export: Path | None = None,
+    export_every: int = 1,
+    progress: bool = True,
+) -> Report:
+    """Read every run under ``inputs``, write the report folder, return what was done."""
+    records = read_runs(find_runs(inputs), progress=progress)
+    if not records:
+        raise FileNotFoundError(f"no windbench.nc under {[str(i) for i in inputs]}")
+    mark_duplicates(records)
+    ref_records = read_runs(find_runs([reference]), progress=progress) if reference else None
+    refs = choose_references(records, ref_records)
+    assign_lee_errors(records, refs)
+
+    name = sweep_name(records, inputs)
+    out = Path(out) if out else Path("reports") / name
+    fig_dir = out / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+
+    summary = summary_frame(records)
+    summary.to_csv(out / "summary.csv", index=False)
+    combined = combine(records)
+    combined.attrs.update(
+        sweep=name,
+        lee_reference="; ".join(f"{s}: {r.path}" for s, r in sorted(refs.items())) or "none",
+    )
+    write_atomic(combined, out / "results.nc")
+
+    report = Report(out, records, summary, refs)
+    complete = summary[summary["status"] == "complete"].copy()
+    dims = swept_keys(records)
+    ref_note = _reference_note(refs, reference)
+    aero, aero_src = _aero_params(records)
+
+    def place(result) -> FigureRef | Note:
+        if isinstance(result, F.Missing):
+            report.missing.append(result.name)
+            return Note(result.title, result.needs)
+        F.save(result.figure, fig_dir, result.name)
+        report.drawn.append(result.name)
+        return FigureRef(result.name, result.title, result.caption)
+
+    counts = summary["status"].value_counts().to_dict()
+    overview = Section(
+        "Overview",
+        [
+            Text(
+                f"**{len(records)}** run files under "
+                + ", ".join(f"`{i}`" for i in inputs)
+                + ": "
+                + ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
+                + ". Swept settings (dimensions of `results.nc`): "
+                + ", ".join(f"`{d}`" for d in dims)
+                + "."
+            ),
+            Text(
+                f"Figures per run: lee and divergence figures are time means over the second "
+                f"half of each run (t >= {AVERAGE_FROM:g} t_end); time per step is the mean "
+                "wall time over every step but the first (which includes numba's compile or "
+                "cache load). Files: `results.nc` (combined), `summary.csv` (one row per run), "
+                "`figures/` (PNG and SVG)."
+            ),
+            Text(ref_note),
+        ],
+    )
+    if refs:
+        overview.blocks.append(
+            Table(
+                pd.DataFrame(
+                    [
+                        {"scene": s, "reference run": r.label, "file": str(r.path)}
+                        for s, r in sorted(refs.items())
+                    ]
+                ),
+                "Lee-error references",
+            )
+        )
+    records_ok = [r for r in records if r.status == "complete"]
+    paper = Section(
+        "The paper's figures (§5)",
+        [
+            Text(
+                "Drawn from the run datasets; each needs particular runs, and says which when "
+                f"they are missing (`{PAPER_COMMAND}` makes them all)."
+            ),
+            place(F.fig3_flag(records_ok)),
+            place(F.fig45_two_flags_wall(records_ok)),
+            place(F.fig6_shirt(records_ok)),
+            place(F.fig_opposing_sources(records_ok)),
+        ],
+    )
+    exps = F.cost_exponents(complete) if len(complete) else pd.DataFrame()
+    measured = Section(
+        "§4.3 measured: cost, lee accuracy, divergence, time step",
+        [
+            Text(
+                "The paper compares the models in words (§4.3): Navier-Stokes is accurate and "
+                "expensive, the global field cheap and without lee, particle tracing cheap with "
+                "lee. Here the same comparison is measured on the runs above."
+            ),
+            place(F.fig_cost(complete)),
+            Table(exps, "Fitted cost exponents p (time per step ~ cells^p)"),
+            place(F.fig_lee_error(complete, ref_note)),
+            place(F.fig_divergence(complete)),
+            place(F.fig_force_ratio_dt(complete)),
+            Table(
+                comparison_table(complete),
+                "Per scene, backend and resolution (mean over the other settings)",
+            ),
+        ],
+    )
+    plate = plate_section(aero, aero_src, place)
+    runs = Section(
+        "Runs",
+        [
+            Table(_run_table(summary, dims), "Every run file found (full table: `summary.csv`)"),
+        ],
+    )
+    skipped = report.skipped
+    if skipped:
+        runs.blocks.append(
+            Table(
+                pd.DataFrame(
+                    [{"file": str(r.path), "status": r.status, "reason": r.reason} for r in skipped]
+                ),
+                "Skipped (not combined)",
+            )
+        )
+    sections = [overview, paper, measured, plate, runs]
+    title = f"windbench report: {name}"
+    (out / "report.md").write_text(to_markdown(title, sections), encoding="utf-8")
+    (out / "index.html").write_text(to_html(title, sections, fig_dir), encoding="utf-8")
+
+    if export:
+        from windbench.report.export import export_run, run_label
+
+        labels: set[str] = set()
+        for rec in records:
+            if rec.status in ("unreadable",):
+                continue
+            label = run_label(rec.settings)
+            n = 1
+            while label in labels:
+                n += 1
+                label = run_label(rec.settings, f"_{n}")
+            labels.add(label)
+            report.exported += export_run(rec.path, Path(export) / label, export_every)
+    return report
+
+
+def plate_section(aero: AeroParams, source: str, place) -> Section:
+    table = F.plate_table(aero)
+    a = np.radians(np.linspace(1.0, 90.0, 90))
+    from windbench.aero import plate_coefficients
+
+    cd, cl = plate_coefficients(a, aero)
+    hd, hl = F.hoerner_long_plate(a)
+    rms_d = math.sqrt(float(np.mean((cd - hd) ** 2)))
+    rms_l = math.sqrt(float(np.mean((cl - hl) ** 2)))
+    return Section(
+        "The aerodynamic model (§3) against flat-plate data",
+        [
+            Text(
+                f"Coefficients C_D = {aero.drag_coefficient:g}, C_L = {aero.lift_coefficient:g} "
+                f"({source}). Against Hoerner's long plate over 1°..90° the model's drag differs "
+                f"by {rms_d:.3g} (RMS) and its lift by {rms_l:.3g}; at 90° the model's drag "
+                f"{aero.drag_coefficient:g} is Hoerner's square plate ({F.HOERNER_SQUARE_CD})."
+            ),
+            place(F.fig_plate(aero)),
+            Table(table, "Force coefficients against angle of attack"),
+        ],
+    )

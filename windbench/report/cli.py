@@ -1,0 +1,75 @@
+"""``windbench-report DIR... [--out PATH] [--reference DIR] [--export DIR]``.
+
+Exit status 0 when the report was written (skipped runs are listed, not fatal), 2 on bad
+arguments or when no run file is found.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="windbench-report",
+        description="Turn windbench run or sweep folders into a report (results.nc, "
+        "summary.csv, figures, report.md, index.html).",
+    )
+    p.add_argument("inputs", nargs="+", type=Path, metavar="DIR", help="run or sweep folders")
+    p.add_argument("--out", type=Path, help="output folder (default reports/<sweep name>/)")
+    p.add_argument(
+        "--reference",
+        type=Path,
+        metavar="DIR",
+        help="folder with the reference run(s) for lee_error (default: the finest "
+        "navier_stokes run of each scene among the inputs)",
+    )
+    p.add_argument(
+        "--export",
+        type=Path,
+        metavar="DIR",
+        help="also write each run's wind (VTK image data) and cloth (VTK polydata + .pvd, PLY)",
+    )
+    p.add_argument(
+        "--export-every", type=int, default=1, metavar="N", help="export every N-th cloth frame"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    if args.export_every < 1:
+        parser().error("--export-every: must be >= 1")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from windbench.report.build import build_report
+
+    try:
+        report = build_report(
+            args.inputs,
+            out=args.out,
+            reference=args.reference,
+            export=args.export,
+            export_every=args.export_every,
+            progress=not args.quiet,
+        )
+    except FileNotFoundError as err:
+        print(f"windbench-report: error: {err}", file=sys.stderr)
+        return 2
+    n_ok = sum(r.status == "complete" for r in report.records)
+    print(f"windbench-report: {n_ok} of {len(report.records)} runs combined -> {report.out}")
+    for rec in report.skipped:
+        print(f"  skipped {rec.path}: {rec.status}: {rec.reason}")
+    if report.missing:
+        print(f"  figures not drawn (runs missing, see report.md): {', '.join(report.missing)}")
+    if args.export:
+        print(f"  exported {len(report.exported)} ParaView series to {args.export}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,346 @@
+"""Run folders -> run records -> one combined dataset with the swept settings as dimensions.
+
+Every ``windbench.nc`` under the given folders is opened lazily (xarray + netCDF4): only the
+per-step figures and the lee probe values are read, so a sweep of thousands of runs need not
+fit in memory. Each file becomes one :class:`RunRecord` with a status:
+
+- ``complete``  — ``status = complete`` and every planned step recorded; enters the combination;
+- ``failed``    — the run stopped (``status = failed``); kept in the summary with its ``failure``;
+- ``partial``   — readable but incomplete (fewer steps than planned, unknown status, or a
+  variable of DESIGN.md's run dataset missing);
+- ``unreadable``— netCDF cannot open it (truncated, corrupted); its settings are taken from
+  the Hydra ``.hydra/config.yaml`` beside it when there is one.
+
+Only ``complete`` runs are combined; the others are listed as skipped with the reason.
+
+Figures per run (DESIGN.md "Run dataset"):
+
+- ``lee_speed_ratio``, ``lee_force_ratio``, ``divergence_rms``: mean over the second half of
+  the simulated time (:data:`AVERAGE_FROM`), after the start-up transient of the wind;
+  ``*_final`` is the value at the last step; ``divergence_max`` is the maximum over all steps.
+- ``step_seconds_<phase>``: mean wall time per step and phase over every step but the first
+  (the first includes numba's compile or cache load); ``seconds_per_step`` = phase ``total``.
+- ``lee_error`` (see :mod:`windbench.report.lee`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+from omegaconf import OmegaConf
+
+RUN_FILE = "windbench.nc"
+AVERAGE_FROM = 0.5  # time averages use t >= AVERAGE_FROM * t_end
+# canonical setting -> dotted config key; always dimensions of the combined dataset
+SETTINGS = {
+    "wind": "wind.name",
+    "scene": "scene.name",
+    "resolution": "grid.resolution",
+    "dt": "sim.dt",
+    "seed": "seed",
+}
+# config keys that never count as swept settings (scene contents follow from scene.name)
+IGNORED = ("scene.", "output.", "hydra.", "sim.progress", "resume", "experiment")
+REQUIRED = ("wind", "step_seconds", "cloth_position", "divergence_rms")
+AVERAGED = ("lee_speed_ratio", "lee_force_ratio", "divergence_rms")
+
+
+@dataclass
+class RunRecord:
+    """What the report knows about one run file (small: no fields, no cloth frames)."""
+
+    path: Path
+    status: str  # complete | failed | partial | unreadable
+    reason: str = ""
+    settings: dict = field(default_factory=dict)  # canonical settings (wind, scene, ...)
+    config: dict = field(default_factory=dict)  # flattened resolved config (dotted keys)
+    figures: dict = field(default_factory=dict)  # scalar figures
+    phases: dict = field(default_factory=dict)  # phase -> mean seconds per step
+    lee_points: np.ndarray | None = None  # (n, 3) lee probe points
+    lee_wind: np.ndarray | None = None  # (n, 3) wind there at the last snapshot
+    free_stream_speed: float = math.nan  # mean |u| at the free-stream probes, last snapshot
+    reference_speed: float = math.nan
+    experiment: str = ""
+
+    @property
+    def label(self) -> str:
+        s = self.settings
+        if not s.get("wind"):
+            return self.path.parent.name
+        return (
+            f"{s.get('scene')}/{s.get('wind')} r={s.get('resolution')} "
+            f"dt={_fmt(s.get('dt'))} seed={s.get('seed')}"
+        )
+
+
+def _fmt(x) -> str:
+    return f"{x:.4g}" if isinstance(x, float) else str(x)
+
+
+def find_runs(inputs: Iterable, filename: str = RUN_FILE) -> list[Path]:
+    """Every run file under the given folders (a file given directly is taken as is)."""
+    found: dict[Path, None] = {}
+    for item in inputs:
+        p = Path(item)
+        if p.is_file():
+            found[p.resolve()] = None
+        elif p.is_dir():
+            for f in sorted(p.rglob(filename)):
+                found[f.resolve()] = None
+        else:
+            raise FileNotFoundError(f"no such run or sweep folder: {p}")
+    return list(found)
+
+
+def flatten(tree, prefix: str = "") -> dict:
+    """Nested dicts -> {dotted.key: value}; lists become tuples (hashable)."""
+    out = {}
+    if isinstance(tree, dict):
+        for k, v in tree.items():
+            out.update(flatten(v, f"{prefix}{k}."))
+    elif isinstance(tree, list):
+        out[prefix[:-1]] = tuple(
+            tuple(v) if isinstance(v, list) else (str(v) if isinstance(v, dict) else v)
+            for v in tree
+        )
+    else:
+        out[prefix[:-1]] = tree
+    return out
+
+
+def _settings_from_config(flat: dict) -> dict:
+    return {name: flat.get(key) for name, key in SETTINGS.items()}
+
+
+def _config_beside(path: Path) -> dict:
+    """The flattened Hydra config saved beside a run file, or {}."""
+    hydra_cfg = path.parent / ".hydra" / "config.yaml"
+    if not hydra_cfg.is_file():
+        return {}
+    try:
+        return flatten(OmegaConf.to_container(OmegaConf.load(hydra_cfg), resolve=False))
+    except Exception:  # noqa: BLE001 - best effort: settings of an unreadable run
+        return {}
+
+
+def _time_mean(values: np.ndarray, times: np.ndarray) -> float:
+    if values.size == 0 or not np.isfinite(values).any():
+        return math.nan
+    late = times >= AVERAGE_FROM * times[-1]
+    return float(np.nanmean(values[late] if late.any() else values))
+
+
+def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
+    times = np.asarray(ds["time"].values, dtype=float)
+    figs: dict[str, float] = {}
+    for name in AVERAGED:
+        if name in ds and ds.sizes.get("time", 0):
+            vals = np.asarray(ds[name].values, dtype=float)
+            figs[name] = _time_mean(vals, times)
+            figs[f"{name}_final"] = float(vals[-1])
+        else:
+            figs[name] = figs[f"{name}_final"] = math.nan
+    if "divergence_max" in ds and ds.sizes.get("time", 0):
+        figs["divergence_max"] = float(np.nanmax(ds["divergence_max"].values))
+    else:
+        figs["divergence_max"] = math.nan
+    phases = {}
+    if "step_seconds" in ds and ds.sizes.get("time", 0):
+        sec = np.asarray(ds["step_seconds"].values, dtype=float)
+        steady = sec[1:] if sec.shape[0] > 1 else sec
+        for j, ph in enumerate(ds["phase"].values):
+            phases[str(ph)] = float(steady[:, j].mean())
+    figs["seconds_per_step"] = phases.get("total", math.nan)
+    shape = ds.attrs.get("grid_shape")
+    shape = [int(v) for v in np.atleast_1d(shape)] if shape is not None else list(ds["wind"].shape[1:4])
+    figs["grid_cells"] = int(np.prod(shape))
+    figs["grid_spacing"] = float(ds.attrs.get("grid_spacing", math.nan))
+    figs["steps_completed"] = int(ds.attrs.get("steps_completed", ds.sizes.get("time", 0)))
+    figs["steps_planned"] = int(ds.attrs.get("steps_planned", -1))
+    return figs, phases
+
+
+def _probes(ds: xr.Dataset, rec: RunRecord):
+    if "probe_wind" not in ds or ds.sizes.get("snapshot", 0) == 0:
+        return
+    box = np.asarray(ds["probe_box"].values).astype(str)
+    pts = np.asarray(ds["probe_points"].values, dtype=float)
+    last = np.asarray(ds["probe_wind"].isel(snapshot=-1).values, dtype=float)
+    lee, free = box == "lee", box == "free_stream"
+    rec.lee_points, rec.lee_wind = pts[lee], last[lee]
+    if free.any():
+        rec.free_stream_speed = float(np.linalg.norm(last[free], axis=1).mean())
+
+
+def read_run(path: Path) -> RunRecord:
+    """One run file -> RunRecord (never raises for a bad file: it becomes a status)."""
+    path = Path(path)
+    try:
+        ds = xr.open_dataset(path, engine="netcdf4")
+    except Exception as err:  # noqa: BLE001 - any reason to be unreadable is reported
+        flat = _config_beside(path)
+        return RunRecord(
+            path,
+            "unreadable",
+            f"cannot open: {type(err).__name__}: {err}",
+            settings=_settings_from_config(flat),
+            config=flat,
+        )
+    with ds:
+        attrs = dict(ds.attrs)
+        try:
+            flat = flatten(OmegaConf.to_container(OmegaConf.create(attrs.get("config", "{}"))))
+        except Exception:  # noqa: BLE001
+            flat = _config_beside(path)
+        settings = _settings_from_config(flat)
+        for name in SETTINGS:  # the dataset's own attributes win over the config text
+            if name in attrs:
+                v = attrs[name]
+                settings[name] = v.item() if isinstance(v, np.generic) else v
+        rec = RunRecord(
+            path,
+            "complete",
+            settings=settings,
+            config=flat,
+            experiment=str(attrs.get("experiment", "") or ""),
+            reference_speed=float(attrs.get("reference_speed", math.nan)),
+        )
+        status = attrs.get("status")
+        missing = [v for v in REQUIRED if v not in ds.variables]
+        try:
+            rec.figures, rec.phases = _figures(ds)
+            _probes(ds, rec)
+        except Exception as err:  # noqa: BLE001 - a damaged variable makes the run partial
+            rec.status, rec.reason = "partial", f"cannot read figures: {type(err).__name__}: {err}"
+            return rec
+    done, planned = rec.figures["steps_completed"], rec.figures["steps_planned"]
+    if status == "failed":
+        rec.status, rec.reason = "failed", str(attrs.get("failure", "")) or "status failed"
+    elif status != "complete":
+        rec.status, rec.reason = "partial", f"status attribute is {status!r}, not 'complete'"
+    elif missing:
+        rec.status, rec.reason = "partial", f"missing variables {missing}"
+    elif planned >= 0 and done < planned:
+        rec.status, rec.reason = "partial", f"{done} of {planned} steps recorded"
+    return rec
+
+
+def read_runs(paths: Sequence[Path], progress: bool = True) -> list[RunRecord]:
+    from tqdm.auto import tqdm
+
+    bar = tqdm(paths, desc="reading runs", unit="run", disable=not progress or len(paths) < 20)
+    return [read_run(p) for p in bar]
+
+
+def mark_duplicates(records: list[RunRecord]) -> None:
+    """Complete runs with the same settings as an earlier one are skipped (one cell each)."""
+    seen: dict[tuple, RunRecord] = {}
+    dims = swept_keys(records)
+    for rec in records:
+        if rec.status != "complete":
+            continue
+        key = tuple(_setting(rec, d) for d in dims)
+        if key in seen:
+            rec.status = "duplicate"
+            rec.reason = f"same settings as {seen[key].path}"
+        else:
+            seen[key] = rec
+
+
+def _setting(rec: RunRecord, name: str):
+    if name in SETTINGS:
+        return rec.settings.get(name)
+    return rec.config.get(name)
+
+
+def swept_keys(records: Sequence[RunRecord]) -> list[str]:
+    """The dimensions: :data:`SETTINGS`, then every other config key that all complete runs
+    have and that takes more than one value among them (e.g. ``aero.lift_coefficient``)."""
+    complete = [r for r in records if r.status in ("complete", "duplicate")]
+    extra = []
+    if complete:
+        common = set(complete[0].config)
+        for r in complete[1:]:
+            common &= set(r.config)
+        for key in sorted(common):
+            if key in SETTINGS.values() or key.startswith(IGNORED) or key in IGNORED:
+                continue
+            if len({repr(r.config[key]) for r in complete}) > 1:
+                extra.append(key)
+    return list(SETTINGS) + extra
+
+
+def summary_frame(records: Sequence[RunRecord]) -> pd.DataFrame:
+    """One row per run file: settings, figures, seconds per phase, status and reason."""
+    dims = swept_keys(records)
+    rows = []
+    for rec in records:
+        row = {d: _setting(rec, d) for d in dims}
+        row.update(rec.figures)
+        for ph, sec in rec.phases.items():
+            row[f"step_seconds_{ph}"] = sec
+        row.update(status=rec.status, failure=rec.reason, experiment=rec.experiment)
+        row["path"] = str(rec.path)
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    front = [*dims, "status", "failure"]
+    return df[[c for c in front if c in df] + [c for c in df if c not in front]]
+
+
+def combine(records: Sequence[RunRecord]) -> xr.Dataset:
+    """Complete runs -> one dataset whose dimensions are the swept settings.
+
+    Runs at different resolutions have different grids, so the combination holds the
+    per-run figures (scalars, and ``step_seconds`` per ``phase``); a settings combination that
+    was not run is NaN. The path of each run file is kept in ``path``.
+    """
+    dims = swept_keys(records)
+    good = [r for r in records if r.status == "complete"]
+    if not good:
+        return xr.Dataset(attrs={"runs": 0})
+    df = summary_frame(good)
+    df = df.drop(columns=[c for c in df if c.startswith("step_seconds_")] + ["status", "failure"])
+    for c in dims:  # tuples (list-valued settings) are not netCDF values
+        if df[c].map(lambda v: isinstance(v, tuple)).any():
+            df[c] = df[c].map(str)
+    ds = xr.Dataset.from_dataframe(df.set_index(dims))
+    phase_rows = [
+        {**{d: _setting(r, d) for d in dims}, "phase": ph, "step_seconds": sec}
+        for r in good
+        for ph, sec in r.phases.items()
+    ]
+    if phase_rows:
+        pf = pd.DataFrame(phase_rows)
+        for c in dims:
+            if pf[c].map(lambda v: isinstance(v, tuple)).any():
+                pf[c] = pf[c].map(str)
+        ds = ds.merge(xr.Dataset.from_dataframe(pf.set_index([*dims, "phase"])))
+        ds["step_seconds"].attrs.update(
+            long_name="mean wall time per step (first step excluded)", units="s"
+        )
+    for name in ds.data_vars:
+        if ds[name].dtype == object:
+            ds[name] = ds[name].fillna("").astype(str)
+    units = {
+        "lee_speed_ratio": "1",
+        "lee_force_ratio": "1",
+        "divergence_rms": "1",
+        "divergence_max": "1",
+        "lee_error": "1",
+        "seconds_per_step": "s",
+        "grid_spacing": "m",
+    }
+    for name, unit in units.items():
+        if name in ds:
+            ds[name].attrs["units"] = unit
+    ds.attrs.update(
+        runs=len(good),
+        averaging=f"time means over t >= {AVERAGE_FROM} t_end; step times exclude the first step",
+    )
+    return ds

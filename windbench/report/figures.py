@@ -1,0 +1,605 @@
+"""Figures of the report: the paper's Figs. 3-6 from run datasets, and §4.3 measured.
+
+Drawn with matplotlib's object API (``matplotlib.figure.Figure`` + Agg canvas: no pyplot
+state, no display). Every figure function returns a :class:`Drawn` (written as PNG and SVG)
+or a :class:`Missing` that says which runs would produce it.
+
+Paper figures (§5): Fig. 3 the flag in particle-traced wind at a few times; Figs. 4/5 two
+flags and a wall, Navier-Stokes beside particle tracing, over a horizontal slice of wind
+speed that shows the lee; Fig. 6 the shirt with lee (particles) beside without (global);
+§4.2.2's opposing sources: the per-source particle field beside the field that tagging
+cells with the superposed ``w = sum w_i`` would give.
+
+§4.3 measured: cost per step against grid cells (log-log, fitted exponent), lee error and
+divergence against resolution, lee force ratio against time step, and the §3 force law as
+flat-plate coefficients beside Hoerner's measurements (Fluid-Dynamic Lift, 1985).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: F401 - registers "3d"
+from omegaconf import OmegaConf
+
+from windbench.aero import AeroParams, plate_coefficients
+from windbench.report.collect import RunRecord
+from windbench.scenes import Scene, build_scene
+from windbench.wind.primitives import superpose
+
+BACKEND_COLORS = {"global": "tab:blue", "particles": "tab:orange", "navier_stokes": "tab:green"}
+MARKERS = "osD^v<>ph*"
+SNAPSHOT_FRAMES = 4  # cloth frames in Fig. 3
+
+
+@dataclass
+class Drawn:
+    name: str
+    title: str
+    caption: str
+    figure: Figure
+
+
+@dataclass
+class Missing:
+    name: str
+    title: str
+    needs: str  # which runs would produce it, with the command
+
+
+def _color(wind: str) -> str:
+    return BACKEND_COLORS.get(wind, "tab:gray")
+
+
+def save(fig: Figure, folder: Path, name: str) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    for ext in ("png", "svg"):
+        path = folder / f"{name}.{ext}"
+        fig.savefig(path, dpi=110, bbox_inches="tight", metadata=_metadata(ext))
+        out.append(path)
+    return out
+
+
+def _metadata(ext: str) -> dict:
+    # no creation dates: the same runs give the same files
+    return {"Date": None} if ext == "svg" else {"Software": "windbench/matplotlib"}
+
+
+# ---------------------------------------------------------------------------- helpers
+
+
+def pick(records: Sequence[RunRecord], scene: str, wind: str) -> RunRecord | None:
+    """The finest complete run of (scene, wind): highest resolution, smallest dt, lowest seed."""
+    runs = [
+        r
+        for r in records
+        if r.status == "complete"
+        and r.settings.get("scene") == scene
+        and r.settings.get("wind") == wind
+    ]
+    if not runs:
+        return None
+    return min(
+        runs,
+        key=lambda r: (
+            -int(r.settings["resolution"]),
+            float(r.settings["dt"]),
+            int(r.settings["seed"]),
+            str(r.path),
+        ),
+    )
+
+
+def scene_of(ds: xr.Dataset) -> Scene:
+    """The run's scene, rebuilt from the resolved config stored in the dataset."""
+    cfg = OmegaConf.create(ds.attrs["config"])
+    return build_scene(cfg.scene)
+
+
+def _cloth_polys(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    return positions[triangles]
+
+
+def _draw_bodies_3d(ax, scene: Scene):
+    for body in scene.bodies:
+        p = np.asarray(body.params)
+        if body.kind == "box":
+            lo, hi = p[0:3], p[3:6]
+            xs, ys, zs = zip(lo, hi, strict=True)
+            faces = []
+            for axis in range(3):
+                for side in (lo[axis], hi[axis]):
+                    others = [a for a in range(3) if a != axis]
+                    corners = []
+                    for u, v in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                        c = np.empty(3)
+                        c[axis] = side
+                        c[others[0]] = (lo, hi)[u][others[0]]
+                        c[others[1]] = (lo, hi)[v][others[1]]
+                        corners.append(c)
+                    faces.append(corners)
+            ax.add_collection3d(
+                Poly3DCollection(faces, facecolor="0.6", edgecolor="0.3", alpha=0.35, lw=0.5)
+            )
+        elif body.kind in ("cylinder", "capsule"):
+            a, b = p[0:3], p[3:6]
+            ax.plot(*zip(a, b, strict=True), color="0.3", lw=2.0)
+
+
+def _draw_cloth_3d(ax, positions, triangles, color="tab:red"):
+    ax.add_collection3d(
+        Poly3DCollection(
+            _cloth_polys(positions, triangles),
+            facecolor=color,
+            edgecolor="k",
+            linewidths=0.1,
+            alpha=0.85,
+        )
+    )
+
+
+def _frame_3d(ax, lower, upper):
+    ax.set_xlim(lower[0], upper[0])
+    ax.set_ylim(lower[1], upper[1])
+    ax.set_zlim(lower[2], upper[2])
+    ax.set_box_aspect(tuple(np.asarray(upper) - np.asarray(lower)))
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    ax.view_init(elev=18, azim=-60)
+    ax.locator_params(nbins=4)
+    ax.tick_params(labelsize=7)
+
+
+def _cloth_bounds(ds: xr.Dataset, scene: Scene, margin: float = 0.4):
+    """A view box around every frame of the cloth (at least 1 m per axis), inside the domain."""
+    pos = np.asarray(ds["cloth_position"].values)
+    mid = 0.5 * (pos.min(axis=(0, 1)) + pos.max(axis=(0, 1)))
+    half = np.maximum(0.5 * (pos.max(axis=(0, 1)) - pos.min(axis=(0, 1))) + margin, 0.5)
+    lo = np.minimum(mid - half, scene.upper)
+    hi = np.maximum(mid + half, scene.lower)
+    lo = np.maximum(lo, scene.lower)
+    hi = np.minimum(hi, scene.upper)
+    lo[2] = scene.lower[2]
+    return lo, hi
+
+
+def _lee_height(ds: xr.Dataset) -> float:
+    """z of the horizontal wind slice: the centre of the lee probe box, else mid-domain."""
+    if "probe_points" in ds:
+        box = np.asarray(ds["probe_box"].values).astype(str)
+        pts = np.asarray(ds["probe_points"].values)
+        if (box == "lee").any():
+            return float(pts[box == "lee", 2].mean())
+    z = ds["z"].values
+    return float(0.5 * (z[0] + z[-1]))
+
+
+def _slice(ds: xr.Dataset, z: float, component: int | None = None) -> np.ndarray:
+    """(nx, ny) wind speed (or one component) at the cell layer nearest to height z."""
+    layer = ds["wind"].isel(snapshot=-1).sel(z=z, method="nearest").values
+    return np.linalg.norm(layer, axis=-1) if component is None else layer[..., component]
+
+
+def _extent(ds: xr.Dataset):
+    h = float(ds.attrs.get("grid_spacing", ds["x"].values[1] - ds["x"].values[0]))
+    x, y = ds["x"].values, ds["y"].values
+    return [x[0] - h / 2, x[-1] + h / 2, y[0] - h / 2, y[-1] + h / 2]
+
+
+def _draw_bodies_xy(ax, scene: Scene, z: float):
+    from matplotlib.patches import Circle, Rectangle
+
+    for body in scene.bodies:
+        lo, hi = body.bounds()
+        if body.kind == "plane" or not (lo[2] <= z <= hi[2]):
+            continue
+        if body.kind == "box":
+            ax.add_patch(
+                Rectangle(
+                    (lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fc="0.5", ec="k", lw=0.6
+                )
+            )
+        else:
+            p = np.asarray(body.params)
+            ax.add_patch(Circle((p[0], p[1]), max(p[6], 0.04), fc="0.3", ec="k", lw=0.6))
+
+
+def _figure(width: float, height: float) -> Figure:
+    return Figure(figsize=(width, height), layout="constrained")
+
+
+def _run_note(rec: RunRecord) -> str:
+    s = rec.settings
+    return f"{s['wind']}, resolution {s['resolution']}, dt = {float(s['dt']):.4g} s"
+
+
+# ---------------------------------------------------------------------------- paper figures
+
+
+def fig3_flag(records: Sequence[RunRecord]) -> Drawn | Missing:
+    """Fig. 3: the flag in the wind (particle tracing), a few frames in time."""
+    title = "Fig. 3 — flag in the wind"
+    rec = pick(records, "flag", "particles")
+    fallback = rec is None
+    if fallback:
+        rec = next((pick(records, "flag", w) for w in ("navier_stokes", "global") if pick(records, "flag", w)), None)
+    if rec is None:
+        return Missing("fig3_flag", title, "a `flag` run with `wind=particles`: `windbench scene=flag wind=particles`")
+    with xr.open_dataset(rec.path) as ds:
+        scene = scene_of(ds)
+        times = ds["time"].values
+        idx = np.unique(np.linspace(0, len(times) - 1, SNAPSHOT_FRAMES).round().astype(int))
+        tris = ds["cloth_triangles"].values
+        lo, hi = _cloth_bounds(ds, scene)
+        fig = _figure(3.2 * len(idx), 3.4)
+        for n, i in enumerate(idx):
+            ax = fig.add_subplot(1, len(idx), n + 1, projection="3d")
+            _draw_bodies_3d(ax, scene)
+            _draw_cloth_3d(ax, ds["cloth_position"].isel(time=int(i)).values, tris)
+            _frame_3d(ax, lo, hi)
+            ax.set_title(f"t = {times[i]:.2f} s", fontsize=9)
+    note = " (no particles run in the inputs: shown with the backend that is)" if fallback else ""
+    caption = f"The flag of Fig. 3 at {len(idx)} times; {_run_note(rec)}{note}."
+    return Drawn("fig3_flag", title, caption, fig)
+
+
+def _lee_panels(records, scene_name, winds, name, title, rows_3d_times=("last",)):
+    present = [(w, pick(records, scene_name, w)) for w in winds]
+    present = [(w, r) for w, r in present if r is not None]
+    if not present:
+        return None, [], []
+    datasets = [xr.open_dataset(r.path) for _, r in present]
+    try:
+        z = _lee_height(datasets[0])
+        speeds = [_slice(ds, z) for ds in datasets]
+        vmax = max(float(s.max()) for s in speeds) or 1.0
+        n = len(present)
+        fig = _figure(4.2 * n, 7.2)
+        axes_slice = []
+        for c, ((wind, rec), ds, speed) in enumerate(zip(present, datasets, speeds, strict=True)):
+            scene = scene_of(ds)
+            ax = fig.add_subplot(2, n, c + 1, projection="3d")
+            _draw_bodies_3d(ax, scene)
+            tris = ds["cloth_triangles"].values
+            if tris.size:
+                _draw_cloth_3d(ax, ds["cloth_position"].isel(time=-1).values, tris)
+            _frame_3d(ax, scene.lower, scene.upper)
+            ax.set_title(f"{wind}  (t = {float(ds['time'].values[-1]):.2f} s)", fontsize=10)
+            ax2 = fig.add_subplot(2, n, n + c + 1)
+            im = ax2.imshow(
+                speed.T, origin="lower", extent=_extent(ds), vmin=0, vmax=vmax, cmap="viridis"
+            )
+            _draw_bodies_xy(ax2, scene, z)
+            if tris.size:
+                pos = ds["cloth_position"].isel(time=-1).values
+                ax2.plot(pos[:, 0], pos[:, 1], ".", color="tab:red", ms=0.8)
+            ax2.set_aspect("equal")
+            ax2.set_xlabel("x (m)")
+            ax2.set_ylabel("y (m)")
+            lsr = rec.figures.get("lee_speed_ratio", math.nan)
+            lfr = rec.figures.get("lee_force_ratio", math.nan)
+            label = f"|u| at z = {z:.2f} m; lee speed ratio {lsr:.2f}"
+            if np.isfinite(lfr):
+                label += f", force ratio {lfr:.2f}"
+            ax2.set_title(label, fontsize=8)
+            axes_slice.append(ax2)
+        fig.colorbar(im, ax=axes_slice, label="wind speed (m/s)", shrink=0.8)
+    finally:
+        for ds in datasets:
+            ds.close()
+    return fig, present, [w for w in winds if w not in dict(present)]
+
+
+def fig45_two_flags_wall(records: Sequence[RunRecord]) -> Drawn | Missing:
+    """Figs. 4/5: two flags and a wall; Navier-Stokes beside particle tracing (and global)."""
+    title = "Figs. 4 and 5 — two flags and a wall"
+    winds = ("navier_stokes", "particles", "global")
+    fig, present, absent = _lee_panels(records, "two_flags_wall", winds, "fig45", title)
+    if fig is None:
+        return Missing(
+            "fig45_two_flags_wall",
+            title,
+            "`two_flags_wall` runs with `wind=navier_stokes` and `wind=particles`: "
+            "`windbench -m scene=two_flags_wall wind=navier_stokes,particles`",
+        )
+    caption = (
+        "Final frame of each backend (top) and the wind speed in a horizontal slice through "
+        "the lee box (bottom; grey: the wall, red dots: cloth vertices). The flag behind the "
+        "wall (y > 2 m) is in the lee. Runs: " + "; ".join(_run_note(r) for _, r in present) + "."
+    )
+    if absent:
+        caption += " Not in the inputs: " + ", ".join(f"`wind={w}`" for w in absent) + "."
+    return Drawn("fig45_two_flags_wall", title, caption, fig)
+
+
+def fig6_shirt(records: Sequence[RunRecord]) -> Drawn | Missing:
+    """Fig. 6: the shirt with lee (particles) beside the shirt without (global)."""
+    title = "Fig. 6 — shirt with lee (particles) and without (global)"
+    present = [(w, pick(records, "shirt", w)) for w in ("particles", "global")]
+    present = [(w, r) for w, r in present if r is not None]
+    if not present:
+        return Missing(
+            "fig6_shirt",
+            title,
+            "`shirt` runs with `wind=particles` and `wind=global`: "
+            "`windbench -m scene=shirt wind=particles,global`",
+        )
+    n = len(present)
+    fig = _figure(3.6 * n, 7.0)
+    for c, (wind, rec) in enumerate(present):
+        with xr.open_dataset(rec.path) as ds:
+            scene = scene_of(ds)
+            tris = ds["cloth_triangles"].values
+            lo, hi = _cloth_bounds(ds, scene)
+            for row, i in enumerate((0, -1)):
+                ax = fig.add_subplot(2, n, row * n + c + 1, projection="3d")
+                _draw_bodies_3d(ax, scene)
+                _draw_cloth_3d(ax, ds["cloth_position"].isel(time=i).values, tris, "tab:blue")
+                _frame_3d(ax, lo, hi)
+                ax.view_init(elev=10, azim=-150)
+                t = float(ds["time"].values[i])
+                ax.set_title(f"{wind} ({'lee' if wind == 'particles' else 'no lee'}), t = {t:.2f} s", fontsize=9)
+    caption = "First (top) and last (bottom) frame. Runs: " + "; ".join(
+        _run_note(r) for _, r in present
+    )
+    missing = {"particles", "global"} - {w for w, _ in present}
+    if missing:
+        caption += ". Not in the inputs: " + ", ".join(f"`wind={w}`" for w in sorted(missing))
+    return Drawn("fig6_shirt", title, caption + ".", fig)
+
+
+def tagging_field(ds: xr.Dataset) -> np.ndarray:
+    """The wind that tagging cells with the superposed field would give (paper §4.2.2).
+
+    Cells the per-source particles reached (non-zero wind in the run) are tagged "wind" and
+    get ``w = sum_i w_i`` at their centre; untagged cells get zero.
+    """
+    scene = scene_of(ds)
+    x, y, z = ds["x"].values, ds["y"].values, ds["z"].values
+    centres = np.stack(np.meshgrid(x, y, z, indexing="ij"), axis=-1)
+    w = superpose(scene.sources, centres)
+    reached = np.linalg.norm(ds["wind"].isel(snapshot=-1).values, axis=-1) > 0
+    return w * reached[..., None]
+
+
+def fig_opposing_sources(records: Sequence[RunRecord]) -> Drawn | Missing:
+    """§4.2.2: per-source particles beside cell tagging with the superposed field."""
+    title = "§4.2.2 — opposing sources: per-source particles vs. tagging with w = Σ wᵢ"
+    rec = pick(records, "opposing_sources", "particles")
+    if rec is None:
+        return Missing(
+            "opposing_sources",
+            title,
+            "an `opposing_sources` run with `wind=particles`: "
+            "`windbench scene=opposing_sources wind=particles`",
+        )
+    with xr.open_dataset(rec.path) as ds:
+        scene = scene_of(ds)
+        z = float(0.5 * (scene.lower[2] + scene.upper[2]))
+        iz = int(np.abs(ds["z"].values - z).argmin())
+        particles = ds["wind"].isel(snapshot=-1).values[:, :, iz, 0]
+        tagged = tagging_field(ds)[:, :, iz, 0]
+        u = scene.reference_speed
+        fig = _figure(9.0, 3.6)
+        axes = []
+        for c, (field, label) in enumerate(
+            ((particles, "particle tracing (per-source w_i)"), (tagged, "tagging with w = Σ w_i"))
+        ):
+            ax = fig.add_subplot(1, 2, c + 1)
+            im = ax.imshow(field.T, origin="lower", extent=_extent(ds), vmin=-u, vmax=u, cmap="RdBu_r")
+            _draw_bodies_xy(ax, scene, float(ds["z"].values[iz]))
+            ax.set_title(f"{label}\nRMS |u_x| = {np.sqrt(np.mean(field**2)):.2f} m/s", fontsize=9)
+            ax.set_xlabel("x (m)")
+            ax.set_ylabel("y (m)")
+            ax.set_aspect("equal")
+            axes.append(ax)
+        fig.colorbar(im, ax=axes, label="u_x (m/s)", shrink=0.8)
+    caption = (
+        "Wind u_x in the mid-height slice. Each source's particles carry its own velocity, "
+        "so each side of the wall keeps its own wind; tagging the reached cells with the "
+        f"superposed field would cancel it to zero. Run: {_run_note(rec)}."
+    )
+    return Drawn("opposing_sources", title, caption, fig)
+
+
+# ---------------------------------------------------------------------------- §4.3 measured
+
+
+def fit_exponent(cells, seconds) -> float:
+    """p of seconds ~ cells^p by least squares in log-log (nan with < 2 distinct sizes)."""
+    cells, seconds = np.asarray(cells, float), np.asarray(seconds, float)
+    ok = (cells > 0) & (seconds > 0) & np.isfinite(seconds)
+    if len(np.unique(cells[ok])) < 2:
+        return math.nan
+    return float(np.polyfit(np.log(cells[ok]), np.log(seconds[ok]), 1)[0])
+
+
+def _series(df: pd.DataFrame, x: str, y: str, by=("wind", "scene")):
+    """Mean of y at each x within each group (other settings averaged)."""
+    d = df[np.isfinite(df[y].astype(float))]
+    for key, g in d.groupby(list(by), sort=True):
+        s = g.groupby(x)[y].mean().sort_index()
+        yield key, s
+
+
+def cost_exponents(df: pd.DataFrame) -> pd.DataFrame:
+    rows = []
+    for (wind, scene), s in _series(df, "grid_cells", "seconds_per_step"):
+        rows.append(
+            {
+                "wind": wind,
+                "scene": scene,
+                "sizes": len(s),
+                "cells": f"{int(s.index.min())}..{int(s.index.max())}",
+                "exponent": fit_exponent(s.index.values, s.values),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
+    title = "Cost per step against grid cells"
+    if df.empty or not np.isfinite(df["seconds_per_step"]).any():
+        return Missing("cost_vs_cells", title, "complete runs: `windbench -m experiment=paper`")
+    fig = _figure(6.4, 4.4)
+    ax = fig.add_subplot()
+    scenes = sorted(df["scene"].unique())
+    for (wind, scene), s in _series(df, "grid_cells", "seconds_per_step"):
+        p = fit_exponent(s.index.values, s.values)
+        label = f"{wind} / {scene}" + (f": p = {p:.2f}" if np.isfinite(p) else "")
+        ax.loglog(
+            s.index.values,
+            s.values * 1e3,
+            marker=MARKERS[scenes.index(scene) % len(MARKERS)],
+            color=_color(wind),
+            label=label,
+        )
+    ax.set_xlabel("grid cells")
+    ax.set_ylabel("wall time per step (ms)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    caption = (
+        "Mean wall time per step (all phases, first step excluded) against the number of "
+        "grid cells; p is the fitted exponent of time ~ cells^p."
+    )
+    return Drawn("cost_vs_cells", title, caption, fig)
+
+
+def _against(df, x, y, name, title, xlabel, ylabel, caption, needs, logx=False, by=("wind", "scene")):
+    d = df[np.isfinite(df[y].astype(float))] if y in df else df.iloc[0:0]
+    if d.empty:
+        return Missing(name, title, needs)
+    fig = _figure(6.4, 4.4)
+    ax = fig.add_subplot()
+    scenes = sorted(d["scene"].unique())
+    for key, s in _series(d, x, y, by):
+        wind, scene = key[0], key[1]
+        extra = f" r={key[2]}" if len(key) > 2 else ""
+        ax.plot(
+            s.index.values,
+            s.values,
+            marker=MARKERS[scenes.index(scene) % len(MARKERS)],
+            color=_color(wind),
+            label=f"{wind} / {scene}{extra}",
+        )
+    if (d[y] > 0).all():
+        ax.set_yscale("log")
+    if logx:
+        ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    return Drawn(name, title, caption, fig)
+
+
+def fig_lee_error(df: pd.DataFrame, reference_note: str) -> Drawn | Missing:
+    d = df[~df.get("is_reference", pd.Series(False, index=df.index)).astype(bool)] if len(df) else df
+    return _against(
+        d,
+        "resolution",
+        "lee_error",
+        "lee_error_vs_resolution",
+        "Lee-zone error against resolution",
+        "grid.resolution (cells along the longest axis)",
+        "lee error (RMS |u − u_ref| / U_free)",
+        "RMS difference from the reference wind over the lee probe points at the last "
+        f"snapshot, divided by the free-stream speed. {reference_note}",
+        "a `navier_stokes` run of the same scene as reference (or `--reference DIR`) and runs "
+        "to compare: `windbench -m experiment=paper`",
+    )
+
+
+def fig_divergence(df: pd.DataFrame) -> Drawn | Missing:
+    return _against(
+        df,
+        "resolution",
+        "divergence_rms",
+        "divergence_vs_resolution",
+        "Divergence against resolution",
+        "grid.resolution (cells along the longest axis)",
+        "RMS |div u| h / U_ref",
+        "Time mean (second half of the run) of the RMS of |div u| h / U_ref over interior "
+        "air cells (eq. 4.1 asks for 0).",
+        "complete runs: `windbench -m experiment=paper`",
+    )
+
+
+def fig_force_ratio_dt(df: pd.DataFrame) -> Drawn | Missing:
+    return _against(
+        df,
+        "dt",
+        "lee_force_ratio",
+        "lee_force_ratio_vs_dt",
+        "Lee force ratio against time step",
+        "sim.dt (s)",
+        "|F sheltered| / |F exposed|",
+        "Time mean (second half of the run) of the force on the sheltered flag over the "
+        "force on the exposed one; 1 means no lee, 0 a perfect shelter.",
+        "`two_flags_wall` runs at several `sim.dt`: `windbench -m experiment=paper`",
+        logx=True,
+        by=("wind", "scene", "resolution"),
+    )
+
+
+def hoerner_long_plate(alpha):
+    """Hoerner (1985): normal-force coefficient of a long flat plate, C_N = 1/(0.222 + 0.283/sin a);
+    returns (C_D, C_L) = (C_N sin a, C_N cos a)."""
+    alpha = np.asarray(alpha, dtype=float)
+    s = np.sin(alpha)
+    with np.errstate(divide="ignore"):
+        cn = np.where(s > 0, 1.0 / (0.222 + 0.283 / np.where(s > 0, s, 1.0)), 0.0)
+    return cn * s, cn * np.cos(alpha)
+
+
+HOERNER_SQUARE_CD = 1.17  # square plate normal to the flow (Hoerner 1985)
+
+
+def plate_table(params: AeroParams, degrees=(10, 20, 30, 45, 60, 75, 90)) -> pd.DataFrame:
+    a = np.radians(np.asarray(degrees, dtype=float))
+    cd, cl = plate_coefficients(a, params)
+    hd, hl = hoerner_long_plate(a)
+    return pd.DataFrame(
+        {
+            "alpha_deg": list(degrees),
+            "C_D model": cd,
+            "C_L model": cl,
+            "C_D Hoerner": hd,
+            "C_L Hoerner": hl,
+        }
+    )
+
+
+def fig_plate(params: AeroParams) -> Drawn:
+    title = "The §3 force law on a flat plate beside Hoerner's measurements"
+    a = np.radians(np.linspace(0.0, 90.0, 181))
+    cd, cl = plate_coefficients(a, params)
+    hd, hl = hoerner_long_plate(a)
+    deg = np.degrees(a)
+    fig = _figure(6.4, 4.4)
+    ax = fig.add_subplot()
+    ax.plot(deg, cd, color="tab:red", label=f"model drag C_D sin α (C_D = {params.drag_coefficient:g})")
+    ax.plot(deg, cl, color="tab:blue", label=f"model lift C_L sin α cos α (C_L = {params.lift_coefficient:g})")
+    ax.plot(deg, hd, "--", color="tab:red", label="Hoerner long plate C_N sin α")
+    ax.plot(deg, hl, "--", color="tab:blue", label="Hoerner long plate C_N cos α")
+    ax.plot([90], [HOERNER_SQUARE_CD], "ks", label="Hoerner square plate normal, C_D = 1.17")
+    ax.set_xlabel("angle of attack α (degrees)")
+    ax.set_ylabel("force coefficient")
+    ax.set_xlim(0, 92)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    caption = (
+        "Drag and lift coefficients (force / (½ ρ v² A)) of the paper's §3 law for a flat plate "
+        "at angle of attack α, with Hoerner's (Fluid-Dynamic Lift, 1985) long-plate normal-force "
+        "fit C_N = 1/(0.222 + 0.283/sin α) split into drag C_N sin α and lift C_N cos α."
+    )
+    return Drawn("plate_coefficients", title, caption, fig)
