@@ -77,8 +77,10 @@ def _reference_note(refs: dict[str, RunRecord], reference_dir) -> str:
             + (f" and none readable under `{reference_dir}`" if reference_dir else "")
             + ", so `lee_error` is empty."
         )
-    src = f"the finest run under `--reference {reference_dir}`" if reference_dir else (
-        "the finest `navier_stokes` run of the scene among the inputs"
+    src = (
+        f"the finest run under `--reference {reference_dir}`"
+        if reference_dir
+        else ("the finest `navier_stokes` run of the scene among the inputs")
     )
     return f"Reference for `lee_error`: {src}."
 

@@ -158,7 +158,9 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
             phases[str(ph)] = float(steady[:, j].mean())
     figs["seconds_per_step"] = phases.get("total", math.nan)
     shape = ds.attrs.get("grid_shape")
-    shape = [int(v) for v in np.atleast_1d(shape)] if shape is not None else list(ds["wind"].shape[1:4])
+    shape = (
+        [int(v) for v in np.atleast_1d(shape)] if shape is not None else list(ds["wind"].shape[1:4])
+    )
     figs["grid_cells"] = int(np.prod(shape))
     figs["grid_spacing"] = float(ds.attrs.get("grid_spacing", math.nan))
     figs["steps_completed"] = int(ds.attrs.get("steps_completed", ds.sizes.get("time", 0)))
@@ -235,7 +237,27 @@ def read_runs(paths: Sequence[Path], progress: bool = True) -> list[RunRecord]:
     from tqdm.auto import tqdm
 
     bar = tqdm(paths, desc="reading runs", unit="run", disable=not progress or len(paths) < 20)
-    return [read_run(p) for p in bar]
+    return sorted((read_run(p) for p in bar), key=sort_key)
+
+
+def sort_key(rec: RunRecord) -> tuple:
+    """Runs ordered by scene, backend, resolution, dt, seed, then file."""
+    s = rec.settings
+
+    def num(v):
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            return math.inf
+
+    return (
+        str(s.get("scene") or ""),
+        str(s.get("wind") or ""),
+        num(s.get("resolution")),
+        num(s.get("dt")),
+        num(s.get("seed")),
+        str(rec.path),
+    )
 
 
 def mark_duplicates(records: list[RunRecord]) -> None:

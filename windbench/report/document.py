@@ -129,7 +129,9 @@ def to_html(title: str, sections: list[Section], figures_dir: Path) -> str:
                 if b.caption:
                     out.append(f"<p><i>{_inline(b.caption)}</i></p>")
                 frame = b.frame.map(_cell) if len(b.frame) else b.frame
-                out.append(frame.to_html(index=False, border=0) if len(b.frame) else "<p>(none)</p>")
+                out.append(
+                    frame.to_html(index=False, border=0) if len(b.frame) else "<p>(none)</p>"
+                )
             elif isinstance(b, FigureRef):
                 png = (figures_dir / f"{b.name}.png").read_bytes()
                 data = base64.b64encode(png).decode("ascii")

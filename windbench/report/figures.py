@@ -204,9 +204,7 @@ def _draw_bodies_xy(ax, scene: Scene, z: float):
             continue
         if body.kind == "box":
             ax.add_patch(
-                Rectangle(
-                    (lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fc="0.5", ec="k", lw=0.6
-                )
+                Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fc="0.5", ec="k", lw=0.6)
             )
         else:
             p = np.asarray(body.params)
@@ -231,9 +229,20 @@ def fig3_flag(records: Sequence[RunRecord]) -> Drawn | Missing:
     rec = pick(records, "flag", "particles")
     fallback = rec is None
     if fallback:
-        rec = next((pick(records, "flag", w) for w in ("navier_stokes", "global") if pick(records, "flag", w)), None)
+        rec = next(
+            (
+                pick(records, "flag", w)
+                for w in ("navier_stokes", "global")
+                if pick(records, "flag", w)
+            ),
+            None,
+        )
     if rec is None:
-        return Missing("fig3_flag", title, "a `flag` run with `wind=particles`: `windbench scene=flag wind=particles`")
+        return Missing(
+            "fig3_flag",
+            title,
+            "a `flag` run with `wind=particles`: `windbench scene=flag wind=particles`",
+        )
     with xr.open_dataset(rec.path) as ds:
         scene = scene_of(ds)
         times = ds["time"].values
@@ -347,7 +356,10 @@ def fig6_shirt(records: Sequence[RunRecord]) -> Drawn | Missing:
                 _frame_3d(ax, lo, hi)
                 ax.view_init(elev=10, azim=-150)
                 t = float(ds["time"].values[i])
-                ax.set_title(f"{wind} ({'lee' if wind == 'particles' else 'no lee'}), t = {t:.2f} s", fontsize=9)
+                ax.set_title(
+                    f"{wind} ({'lee' if wind == 'particles' else 'no lee'}), t = {t:.2f} s",
+                    fontsize=9,
+                )
     caption = "First (top) and last (bottom) frame. Runs: " + "; ".join(
         _run_note(r) for _, r in present
     )
@@ -395,7 +407,9 @@ def fig_opposing_sources(records: Sequence[RunRecord]) -> Drawn | Missing:
             ((particles, "particle tracing (per-source w_i)"), (tagged, "tagging with w = Σ w_i"))
         ):
             ax = fig.add_subplot(1, 2, c + 1)
-            im = ax.imshow(field.T, origin="lower", extent=_extent(ds), vmin=-u, vmax=u, cmap="RdBu_r")
+            im = ax.imshow(
+                field.T, origin="lower", extent=_extent(ds), vmin=-u, vmax=u, cmap="RdBu_r"
+            )
             _draw_bodies_xy(ax, scene, float(ds["z"].values[iz]))
             ax.set_title(f"{label}\nRMS |u_x| = {np.sqrt(np.mean(field**2)):.2f} m/s", fontsize=9)
             ax.set_xlabel("x (m)")
@@ -474,7 +488,9 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
     return Drawn("cost_vs_cells", title, caption, fig)
 
 
-def _against(df, x, y, name, title, xlabel, ylabel, caption, needs, logx=False, by=("wind", "scene")):
+def _against(
+    df, x, y, name, title, xlabel, ylabel, caption, needs, logx=False, by=("wind", "scene")
+):
     d = df[np.isfinite(df[y].astype(float))] if y in df else df.iloc[0:0]
     if d.empty:
         return Missing(name, title, needs)
@@ -503,7 +519,11 @@ def _against(df, x, y, name, title, xlabel, ylabel, caption, needs, logx=False, 
 
 
 def fig_lee_error(df: pd.DataFrame, reference_note: str) -> Drawn | Missing:
-    d = df[~df.get("is_reference", pd.Series(False, index=df.index)).astype(bool)] if len(df) else df
+    d = (
+        df[~df.get("is_reference", pd.Series(False, index=df.index)).astype(bool)]
+        if len(df)
+        else df
+    )
     return _against(
         d,
         "resolution",
@@ -587,8 +607,15 @@ def fig_plate(params: AeroParams) -> Drawn:
     deg = np.degrees(a)
     fig = _figure(6.4, 4.4)
     ax = fig.add_subplot()
-    ax.plot(deg, cd, color="tab:red", label=f"model drag C_D sin α (C_D = {params.drag_coefficient:g})")
-    ax.plot(deg, cl, color="tab:blue", label=f"model lift C_L sin α cos α (C_L = {params.lift_coefficient:g})")
+    ax.plot(
+        deg, cd, color="tab:red", label=f"model drag C_D sin α (C_D = {params.drag_coefficient:g})"
+    )
+    ax.plot(
+        deg,
+        cl,
+        color="tab:blue",
+        label=f"model lift C_L sin α cos α (C_L = {params.lift_coefficient:g})",
+    )
     ax.plot(deg, hd, "--", color="tab:red", label="Hoerner long plate C_N sin α")
     ax.plot(deg, hl, "--", color="tab:blue", label="Hoerner long plate C_N cos α")
     ax.plot([90], [HOERNER_SQUARE_CD], "ks", label="Hoerner square plate normal, C_D = 1.17")

@@ -27,7 +27,12 @@ POINT_DECIMALS = 9  # probe points match when equal to 1 nm
 
 def _finest_key(rec: RunRecord):
     s = rec.settings
-    return (-int(s.get("resolution") or 0), float(s.get("dt") or math.inf), int(s.get("seed") or 0), str(rec.path))
+    return (
+        -int(s.get("resolution") or 0),
+        float(s.get("dt") or math.inf),
+        int(s.get("seed") or 0),
+        str(rec.path),
+    )
 
 
 def choose_references(

@@ -1,0 +1,131 @@
+"""Report pieces against answers known without the code: lee error, fits, Hoerner, tagging."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from omegaconf import OmegaConf
+
+from windbench.aero import AeroParams
+from windbench.cli import compose_config
+from windbench.report.collect import RunRecord, flatten
+from windbench.report.figures import fit_exponent, hoerner_long_plate, plate_table, tagging_field
+from windbench.report.lee import choose_references, lee_error
+
+
+def _record(points, u, free=6.0, **settings) -> RunRecord:
+    rec = RunRecord(Path(f"/runs/{settings}/windbench.nc"), "complete", settings=settings)
+    rec.lee_points, rec.lee_wind, rec.free_stream_speed = points, u, free
+    return rec
+
+
+@pytest.fixture
+def lattice():
+    g = np.linspace(0.1, 0.9, 4)
+    return np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+
+
+def test_lee_error_of_a_uniform_offset_is_its_size_over_the_free_stream(lattice):
+    rng = np.random.default_rng(1)
+    u_ref = rng.normal(size=lattice.shape)
+    offset = np.array([0.9, -1.2, 0.0])  # |offset| = 1.5
+    ref = _record(lattice, u_ref, free=6.0)
+    run = _record(lattice, u_ref + offset)
+    assert lee_error(run, ref) == pytest.approx(1.5 / 6.0, rel=1e-12)
+    assert lee_error(ref, ref) == 0.0
+
+
+def test_lee_error_matches_points_by_position_not_order(lattice):
+    rng = np.random.default_rng(2)
+    u_ref = rng.normal(size=lattice.shape)
+    diff = rng.normal(size=lattice.shape)
+    ref = _record(lattice, u_ref, free=2.0)
+    # the run holds the points shuffled, only half of them, plus points the reference lacks
+    keep = rng.permutation(len(lattice))[: len(lattice) // 2]
+    extra = lattice[:5] + 10.0
+    run = _record(
+        np.concatenate([lattice[keep], extra]),
+        np.concatenate([u_ref[keep] + diff[keep], np.full((5, 3), 99.0)]),
+    )
+    expected = math.sqrt(np.mean(np.sum(diff[keep] ** 2, axis=1))) / 2.0
+    assert lee_error(run, ref) == pytest.approx(expected, rel=1e-12)
+    assert math.isnan(lee_error(_record(extra, np.zeros((5, 3))), ref))  # nothing in common
+
+
+def test_reference_is_the_finest_navier_stokes_run_of_each_scene(lattice):
+    u = np.zeros_like(lattice)
+    runs = [
+        _record(lattice, u, wind="navier_stokes", scene="fence", resolution=32, dt=0.01, seed=0),
+        _record(lattice, u, wind="navier_stokes", scene="fence", resolution=64, dt=0.02, seed=0),
+        _record(lattice, u, wind="navier_stokes", scene="fence", resolution=64, dt=0.01, seed=0),
+        _record(lattice, u, wind="particles", scene="fence", resolution=128, dt=0.01, seed=0),
+        _record(lattice, u, wind="global", scene="flag", resolution=128, dt=0.01, seed=0),
+    ]
+    refs = choose_references(runs)
+    assert refs["fence"] is runs[2]
+    assert "flag" not in refs  # no Navier-Stokes run of the flag: no reference
+    # given a reference folder, its finest run serves even when it is not Navier-Stokes
+    assert choose_references(runs, [runs[4]])["flag"] is runs[4]
+
+
+def test_fit_exponent_recovers_a_power_law():
+    cells = np.array([1e3, 8e3, 64e3, 512e3])
+    assert fit_exponent(cells, 3e-7 * cells**1.37) == pytest.approx(1.37, rel=1e-12)
+    assert math.isnan(fit_exponent([1000, 1000], [1.0, 2.0]))
+
+
+def test_hoerner_long_plate_and_the_model_at_normal_incidence():
+    cd, cl = hoerner_long_plate(np.radians([90.0, 0.0]))
+    assert cd[0] == pytest.approx(1.0 / (0.222 + 0.283), rel=1e-12)  # C_N at 90 degrees
+    assert cl[0] == pytest.approx(0.0, abs=1e-12) and cd[1] == 0.0 and cl[1] == 0.0
+    table = plate_table(AeroParams(drag_coefficient=1.17, lift_coefficient=0.6))
+    normal = table.set_index("alpha_deg").loc[90]
+    assert normal["C_D model"] == pytest.approx(1.17)  # Hoerner's square plate, normal
+    assert table.set_index("alpha_deg").loc[45, "C_L model"] == pytest.approx(0.3)
+
+
+def test_flatten_config_keys():
+    flat = flatten({"a": {"b": 1, "c": [1, 2]}, "d": "x"})
+    assert flat == {"a.b": 1, "a.c": (1, 2), "d": "x"}
+
+
+def _field_dataset(scene: str, wind: np.ndarray | None = None) -> xr.Dataset:
+    cfg = compose_config([f"scene={scene}", "grid.resolution=8"])
+    lo = np.asarray(cfg.scene.domain.min, float)
+    hi = np.asarray(cfg.scene.domain.max, float)
+    h = float((hi - lo).max()) / 8
+    axes = [lo[a] + h * (np.arange(round((hi[a] - lo[a]) / h)) + 0.5) for a in range(3)]
+    shape = (1, *(len(a) for a in axes), 3)
+    ds = xr.Dataset(
+        {
+            "wind": (
+                ("snapshot", "x", "y", "z", "component"),
+                np.ones(shape) if wind is None else wind,
+            )
+        },
+        coords={"x": axes[0], "y": axes[1], "z": axes[2]},
+    )
+    ds.attrs["config"] = OmegaConf.to_yaml(cfg, resolve=True)
+    return ds
+
+
+def test_tagging_with_the_superposed_field_cancels_opposing_sources():
+    """§4.2.2: two equal, opposite directional sources superpose to zero everywhere."""
+    ds = _field_dataset("opposing_sources")
+    assert np.array_equal(tagging_field(ds), np.zeros(ds["wind"].shape[1:]))
+
+
+def test_tagging_gives_the_superposed_wind_on_reached_cells_only():
+    ds = _field_dataset("flag")
+    reached = np.ones(ds["wind"].shape, bool)
+    reached[0, :, 0, :, :] = False  # an untouched row of cells
+    ds["wind"] = ds["wind"].where(reached, 0.0)
+    tagged = tagging_field(ds)
+    assert np.array_equal(tagged[:, 0], np.zeros_like(tagged[:, 0]))
+    np.testing.assert_array_equal(
+        tagged[:, 1:], np.broadcast_to([6.0, 0.0, 0.0], tagged[:, 1:].shape)
+    )
