@@ -234,9 +234,12 @@ def read_run(path: Path) -> RunRecord:
 
 
 def read_runs(paths: Sequence[Path], progress: bool = True) -> list[RunRecord]:
+    import sys
+
     from tqdm.auto import tqdm
 
-    bar = tqdm(paths, desc="reading runs", unit="run", disable=not progress or len(paths) < 20)
+    quiet = not progress or len(paths) < 20 or not sys.stderr.isatty()
+    bar = tqdm(paths, desc="reading runs", unit="run", disable=quiet)
     return sorted((read_run(p) for p in bar), key=sort_key)
 
 
