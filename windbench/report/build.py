@@ -211,6 +211,7 @@ def build_report(
             place(F.fig45_two_flags_wall(records_ok)),
             place(F.fig6_shirt(records_ok)),
             place(F.fig_opposing_sources(records_ok)),
+            place(F.fig_lee_in_time(records_ok)),
         ],
     )
     exps = F.cost_exponents(complete) if len(complete) else pd.DataFrame()

@@ -36,6 +36,7 @@ from windbench.wind.primitives import superpose
 
 BACKEND_COLORS = {"global": "tab:blue", "particles": "tab:orange", "navier_stokes": "tab:green"}
 MARKERS = "osD^v<>ph*"
+LINESTYLES = ("-", "--", ":", "-.")
 SNAPSHOT_FRAMES = 4  # cloth frames in Fig. 3
 
 
@@ -489,14 +490,28 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
 
 
 def _against(
-    df, x, y, name, title, xlabel, ylabel, caption, needs, logx=False, by=("wind", "scene")
+    df,
+    x,
+    y,
+    name,
+    title,
+    xlabel,
+    ylabel,
+    caption,
+    needs,
+    logx=False,
+    logy=True,
+    by=("wind", "scene"),
 ):
+    """y against x, one line per group of ``by`` (means over the other settings)."""
     d = df[np.isfinite(df[y].astype(float))] if y in df else df.iloc[0:0]
     if d.empty:
         return Missing(name, title, needs)
     fig = _figure(6.4, 4.4)
     ax = fig.add_subplot()
     scenes = sorted(d["scene"].unique())
+    third = sorted(d[by[2]].unique()) if len(by) > 2 else []
+    styles = {v: LINESTYLES[i % len(LINESTYLES)] for i, v in enumerate(third)}
     for key, s in _series(d, x, y, by):
         wind, scene = key[0], key[1]
         extra = f" r={key[2]}" if len(key) > 2 else ""
@@ -504,11 +519,14 @@ def _against(
             s.index.values,
             s.values,
             marker=MARKERS[scenes.index(scene) % len(MARKERS)],
+            linestyle=styles.get(key[2], "-") if len(key) > 2 else "-",
             color=_color(wind),
             label=f"{wind} / {scene}{extra}",
         )
-    if (d[y] > 0).all():
+    if logy and (d[y] > 0).all():
         ax.set_yscale("log")
+    elif not logy:
+        ax.set_ylim(bottom=0, top=max(1.1, float(d[y].max()) * 1.1))
     if logx:
         ax.set_xscale("log")
     ax.set_xlabel(xlabel)
@@ -567,6 +585,7 @@ def fig_force_ratio_dt(df: pd.DataFrame) -> Drawn | Missing:
         "force on the exposed one; 1 means no lee, 0 a perfect shelter.",
         "`two_flags_wall` runs at several `sim.dt`: `windbench -m experiment=paper`",
         logx=True,
+        logy=False,
         by=("wind", "scene", "resolution"),
     )
 
@@ -630,3 +649,39 @@ def fig_plate(params: AeroParams) -> Drawn:
         "fit C_N = 1/(0.222 + 0.283/sin α) split into drag C_N sin α and lift C_N cos α."
     )
     return Drawn("plate_coefficients", title, caption, fig)
+
+
+def fig_lee_in_time(records: Sequence[RunRecord]) -> Drawn | Missing:
+    """lee_speed_ratio against time, the finest run of each backend, one panel per scene."""
+    title = "Lee speed ratio in time"
+    good = [r for r in records if r.status == "complete"]
+    scenes = sorted(
+        {r.settings["scene"] for r in good if np.isfinite(r.figures.get("lee_speed_ratio", np.nan))}
+    )
+    if not scenes:
+        return Missing("lee_in_time", title, "runs of a scene with lee and free-stream probes")
+    fig = _figure(min(4.0 * len(scenes), 16.0), 3.4)
+    for c, scene in enumerate(scenes):
+        ax = fig.add_subplot(1, len(scenes), c + 1)
+        for wind in sorted({r.settings["wind"] for r in good if r.settings["scene"] == scene}):
+            rec = pick(good, scene, wind)
+            with xr.open_dataset(rec.path) as ds:
+                if "lee_speed_ratio" in ds:
+                    ax.plot(
+                        ds["time"].values,
+                        ds["lee_speed_ratio"].values,
+                        color=_color(wind),
+                        label=wind,
+                    )
+        ax.set_title(scene, fontsize=9)
+        ax.set_xlabel("t (s)")
+        ax.set_ylim(bottom=0)
+        ax.grid(True, alpha=0.3)
+        if c == 0:
+            ax.set_ylabel("mean |u| lee / free stream")
+            ax.legend(fontsize=7)
+    caption = (
+        "Mean wind speed in each scene's lee box over that in its free-stream box, finest run "
+        "of each backend; 1 means no lee, 0 a perfect wind shadow."
+    )
+    return Drawn("lee_in_time", title, caption, fig)
