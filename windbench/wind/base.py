@@ -69,6 +69,14 @@ class WindField(ABC):
         """Backend figures of the last step (e.g. pressure iterations)."""
         return {}
 
+    def divergence(self) -> np.ndarray | None:
+        """The backend's own discrete div u per cell (NaN outside the air), or None.
+
+        None (the default) lets the loop take central differences of ``velocity()``;
+        a solver on a staggered grid returns the divergence its projection controls.
+        """
+        return None
+
     def solid_mask(self) -> np.ndarray:
         """Cells whose centre lies inside a rigid body."""
         return self._solid
