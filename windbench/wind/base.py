@@ -46,6 +46,7 @@ class WindField(ABC):
     """Base class of the wind backends (see module docstring)."""
 
     name: ClassVar[str] = ""
+    max_cfl: ClassVar[float] = float("inf")  # above it the run warns (see simulate.prepare)
 
     def __init__(self, scene, grid: Grid, params: Any):
         self.scene = scene
