@@ -183,6 +183,7 @@ def test_hydra_multirun_smoke_then_report(tmp_path):
             "experiment=smoke",
             "sim.duration=0.1",
             "sim.dt=0.05",
+            "grid.resolution=2,16",  # 2 cells cannot hold the wall: refused, listed as invalid
             f"hydra.sweep.dir={sweep_dir}",
         ],
         check=True,
@@ -201,5 +202,10 @@ def test_hydra_multirun_smoke_then_report(tmp_path):
     out = tmp_path / "reports" / "smoke"  # default: reports/<experiment>
     assert out.is_dir(), done.stdout
     summary = pd.read_csv(out / "summary.csv")
-    assert len(summary) == len(list(sweep_dir.rglob("windbench.nc"))) >= 1
+    n_runs = len(list(sweep_dir.rglob("windbench.nc")))
+    assert n_runs >= 1
+    assert len(summary) == n_runs + 1  # one row per run, the refused one included
+    invalid = summary[summary["status"] == "invalid"]
+    assert len(invalid) == 1 and "grid.resolution" in invalid["failure"].iloc[0]
+    assert invalid["resolution"].iloc[0] == 2  # its settings, from Hydra's saved config
     assert (out / "index.html").stat().st_size > 10_000

@@ -22,9 +22,11 @@ from windbench.report.collect import (
     AVERAGE_FROM,
     RunRecord,
     combine,
+    find_invalid,
     find_runs,
     mark_duplicates,
     read_runs,
+    sort_key,
     summary_frame,
     swept_keys,
 )
@@ -90,19 +92,24 @@ def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
     if df.empty:
         return df
     cols = {
-        "seconds_per_step": "ms/step",
+        "seconds_per_step_median": "ms/step (median)",
         "lee_error": "lee error",
         "divergence_rms": "divergence rms",
         "lee_force_ratio": "lee force ratio",
         "lee_speed_ratio": "lee speed ratio",
     }
     d = df.copy()
-    d["seconds_per_step"] = d["seconds_per_step"] * 1e3
+    d["seconds_per_step_median"] = d["seconds_per_step_median"] * 1e3
     g = d.groupby(["scene", "wind", "resolution"], sort=True)
     out = g[list(cols)].mean().rename(columns=cols)
     out.insert(0, "runs", g.size())
     out.insert(1, "cells", g["grid_cells"].first())
     return out.reset_index()
+
+
+def _short(text, limit: int = 240) -> str:
+    text = "" if not isinstance(text, str) else text
+    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 def _run_table(df: pd.DataFrame, dims: list[str]) -> pd.DataFrame:
@@ -116,7 +123,10 @@ def _run_table(df: pd.DataFrame, dims: list[str]) -> pd.DataFrame:
         "divergence_rms",
         "failure",
     ]
-    return df[[c for c in cols if c in df]]
+    out = df[[c for c in cols if c in df]].copy()
+    if "failure" in out:
+        out["failure"] = out["failure"].map(_short)
+    return out
 
 
 def build_report(
@@ -128,7 +138,8 @@ def build_report(
     progress: bool = True,
 ) -> Report:
     """Read every run under ``inputs``, write the report folder, return what was done."""
-    records = read_runs(find_runs(inputs), progress=progress)
+    records = read_runs(find_runs(inputs), progress=progress) + find_invalid(inputs)
+    records.sort(key=sort_key)
     if not records:
         raise FileNotFoundError(f"no windbench.nc under {[str(i) for i in inputs]}")
     mark_duplicates(records)
@@ -246,7 +257,10 @@ def build_report(
         runs.blocks.append(
             Table(
                 pd.DataFrame(
-                    [{"file": str(r.path), "status": r.status, "reason": r.reason} for r in skipped]
+                    [
+                        {"file": str(r.path), "status": r.status, "reason": _short(r.reason)}
+                        for r in skipped
+                    ]
                 ),
                 "Skipped (not combined)",
             )

@@ -63,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     n_ok = sum(r.status == "complete" for r in report.records)
     print(f"windbench-report: {n_ok} of {len(report.records)} runs combined -> {report.out}")
     for rec in report.skipped:
-        print(f"  skipped {rec.path}: {rec.status}: {rec.reason}")
+        reason = rec.reason if len(rec.reason) <= 200 else rec.reason[:199] + "…"
+        print(f"  skipped {rec.path}: {rec.status}: {reason}")
     if report.missing:
         print(f"  figures not drawn (runs missing, see report.md): {', '.join(report.missing)}")
     if args.export:

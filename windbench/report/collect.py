@@ -9,7 +9,9 @@ fit in memory. Each file becomes one :class:`RunRecord` with a status:
 - ``partial``   — readable but incomplete (fewer steps than planned, unknown status, or a
   variable of DESIGN.md's run dataset missing);
 - ``unreadable``— netCDF cannot open it (truncated, corrupted); its settings are taken from
-  the Hydra ``.hydra/config.yaml`` beside it when there is one.
+  the Hydra ``.hydra/config.yaml`` beside it when there is one;
+- ``invalid``   — no dataset, but the run's ``run_status.yaml`` (windbench.sweep) says the
+  config was refused before any work; the reason is kept.
 
 Only ``complete`` runs are combined; the others are listed as skipped with the reason.
 
@@ -19,13 +21,16 @@ Figures per run (DESIGN.md "Run dataset"):
   the simulated time (:data:`AVERAGE_FROM`), after the start-up transient of the wind;
   ``*_final`` is the value at the last step; ``divergence_max`` is the maximum over all steps.
 - ``step_seconds_<phase>``: mean wall time per step and phase over every step but the first
-  (the first includes numba's compile or cache load); ``seconds_per_step`` = phase ``total``.
+  (the first includes numba's compile or cache load); ``seconds_per_step`` = phase ``total``;
+  ``seconds_per_step_median`` its median over the same steps (robust to other processes on
+  a shared machine: the cost figure uses it).
 - ``lee_error`` (see :mod:`windbench.report.lee`).
 """
 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +41,7 @@ import xarray as xr
 from omegaconf import OmegaConf
 
 RUN_FILE = "windbench.nc"
+STATUS_FILE = "run_status.yaml"  # windbench.sweep.STATUS_FILE
 AVERAGE_FROM = 0.5  # time averages use t >= AVERAGE_FROM * t_end
 # canonical setting -> dotted config key; always dimensions of the combined dataset
 SETTINGS = {
@@ -81,6 +87,42 @@ class RunRecord:
 
 def _fmt(x) -> str:
     return f"{x:.4g}" if isinstance(x, float) else str(x)
+
+
+def clean_reason(text: str) -> str:
+    """A failure reason on one line: terminal colour codes removed, whitespace collapsed."""
+    return " ".join(re.sub(r"\x1b\[[0-9;]*m", "", str(text)).split())
+
+
+def find_invalid(inputs: Iterable, filename: str = RUN_FILE) -> list[RunRecord]:
+    """Runs a sweep refused (``run_status.yaml`` says invalid, no dataset beside it)."""
+    import yaml
+
+    out = []
+    for item in inputs:
+        p = Path(item)
+        if not p.is_dir():
+            continue
+        for status in sorted(p.rglob(STATUS_FILE)):
+            if (status.parent / filename).exists():
+                continue
+            try:
+                info = yaml.safe_load(status.read_text()) or {}
+            except (OSError, yaml.YAMLError):
+                continue
+            if info.get("status") != "invalid":
+                continue
+            flat = _config_beside(status.parent / filename)
+            out.append(
+                RunRecord(
+                    (status.parent / filename).resolve(),
+                    "invalid",
+                    clean_reason(info.get("reason", "config refused")),
+                    settings=_settings_from_config(flat),
+                    config=flat,
+                )
+            )
+    return out
 
 
 def find_runs(inputs: Iterable, filename: str = RUN_FILE) -> list[Path]:
@@ -157,6 +199,10 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
         for j, ph in enumerate(ds["phase"].values):
             phases[str(ph)] = float(steady[:, j].mean())
     figs["seconds_per_step"] = phases.get("total", math.nan)
+    figs["seconds_per_step_median"] = math.nan
+    if "total" in phases:
+        j = [str(p) for p in ds["phase"].values].index("total")
+        figs["seconds_per_step_median"] = float(np.median(steady[:, j]))
     shape = ds.attrs.get("grid_shape")
     shape = (
         [int(v) for v in np.atleast_1d(shape)] if shape is not None else list(ds["wind"].shape[1:4])
@@ -190,7 +236,7 @@ def read_run(path: Path) -> RunRecord:
         return RunRecord(
             path,
             "unreadable",
-            f"cannot open: {type(err).__name__}: {err}",
+            clean_reason(f"cannot open: {type(err).__name__}: {err}"),
             settings=_settings_from_config(flat),
             config=flat,
         )
@@ -223,7 +269,7 @@ def read_run(path: Path) -> RunRecord:
             return rec
     done, planned = rec.figures["steps_completed"], rec.figures["steps_planned"]
     if status == "failed":
-        rec.status, rec.reason = "failed", str(attrs.get("failure", "")) or "status failed"
+        rec.status, rec.reason = "failed", clean_reason(attrs.get("failure", "")) or "status failed"
     elif status != "complete":
         rec.status, rec.reason = "partial", f"status attribute is {status!r}, not 'complete'"
     elif missing:
@@ -359,6 +405,7 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
         "divergence_max": "1",
         "lee_error": "1",
         "seconds_per_step": "s",
+        "seconds_per_step_median": "s",
         "grid_spacing": "m",
     }
     for name, unit in units.items():

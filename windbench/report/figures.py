@@ -38,6 +38,7 @@ BACKEND_COLORS = {"global": "tab:blue", "particles": "tab:orange", "navier_stoke
 MARKERS = "osD^v<>ph*"
 LINESTYLES = ("-", "--", ":", "-.")
 SNAPSHOT_FRAMES = 4  # cloth frames in Fig. 3
+COST = "seconds_per_step_median"  # robust to other processes on a shared machine
 
 
 @dataclass
@@ -273,18 +274,19 @@ def _lee_panels(records, scene_name, winds, name, title, rows_3d_times=("last",)
         speeds = [_slice(ds, z) for ds in datasets]
         vmax = max(float(s.max()) for s in speeds) or 1.0
         n = len(present)
-        fig = _figure(4.2 * n, 7.2)
+        fig = _figure(4.2 * n, 6.0)
+        grid = fig.add_gridspec(2, n, height_ratios=[1.25, 1.0])
         axes_slice = []
         for c, ((wind, rec), ds, speed) in enumerate(zip(present, datasets, speeds, strict=True)):
             scene = scene_of(ds)
-            ax = fig.add_subplot(2, n, c + 1, projection="3d")
+            ax = fig.add_subplot(grid[0, c], projection="3d")
             _draw_bodies_3d(ax, scene)
             tris = ds["cloth_triangles"].values
             if tris.size:
                 _draw_cloth_3d(ax, ds["cloth_position"].isel(time=-1).values, tris)
             _frame_3d(ax, scene.lower, scene.upper)
             ax.set_title(f"{wind}  (t = {float(ds['time'].values[-1]):.2f} s)", fontsize=10)
-            ax2 = fig.add_subplot(2, n, n + c + 1)
+            ax2 = fig.add_subplot(grid[1, c])
             im = ax2.imshow(
                 speed.T, origin="lower", extent=_extent(ds), vmin=0, vmax=vmax, cmap="viridis"
             )
@@ -297,7 +299,9 @@ def _lee_panels(records, scene_name, winds, name, title, rows_3d_times=("last",)
             ax2.set_ylabel("y (m)")
             lsr = rec.figures.get("lee_speed_ratio", math.nan)
             lfr = rec.figures.get("lee_force_ratio", math.nan)
-            label = f"|u| at z = {z:.2f} m; lee speed ratio {lsr:.2f}"
+            label = f"|u| at z = {z:.2f} m; lee speed ratio " + (
+                f"{lsr:.2f}" if np.isfinite(lsr) else "–"
+            )
             if np.isfinite(lfr):
                 label += f", force ratio {lfr:.2f}"
             ax2.set_title(label, fontsize=8)
@@ -448,7 +452,7 @@ def _series(df: pd.DataFrame, x: str, y: str, by=("wind", "scene")):
 
 def cost_exponents(df: pd.DataFrame) -> pd.DataFrame:
     rows = []
-    for (wind, scene), s in _series(df, "grid_cells", "seconds_per_step"):
+    for (wind, scene), s in _series(df, "grid_cells", COST):
         rows.append(
             {
                 "wind": wind,
@@ -463,12 +467,12 @@ def cost_exponents(df: pd.DataFrame) -> pd.DataFrame:
 
 def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
     title = "Cost per step against grid cells"
-    if df.empty or not np.isfinite(df["seconds_per_step"]).any():
+    if df.empty or not np.isfinite(df[COST]).any():
         return Missing("cost_vs_cells", title, "complete runs: `windbench -m experiment=paper`")
     fig = _figure(6.4, 4.4)
     ax = fig.add_subplot()
     scenes = sorted(df["scene"].unique())
-    for (wind, scene), s in _series(df, "grid_cells", "seconds_per_step"):
+    for (wind, scene), s in _series(df, "grid_cells", COST):
         p = fit_exponent(s.index.values, s.values)
         label = f"{wind} / {scene}" + (f": p = {p:.2f}" if np.isfinite(p) else "")
         ax.loglog(
@@ -483,7 +487,7 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     caption = (
-        "Mean wall time per step (all phases, first step excluded) against the number of "
+        "Median wall time per step (all phases, first step excluded) against the number of "
         "grid cells; p is the fitted exponent of time ~ cells^p."
     )
     return Drawn("cost_vs_cells", title, caption, fig)
