@@ -209,3 +209,56 @@ def test_hydra_multirun_smoke_then_report(tmp_path):
     assert len(invalid) == 1 and "grid.resolution" in invalid["failure"].iloc[0]
     assert invalid["resolution"].iloc[0] == 2  # its settings, from Hydra's saved config
     assert (out / "index.html").stat().st_size > 10_000
+
+
+def _as_backend(src: Path, dst: Path, wind: str, edit=None):
+    """A copy of a run dataset relabelled as another backend (and optionally edited)."""
+    with xr.open_dataset(src) as ds:
+        ds = ds.load()
+    ds.attrs["wind"] = wind
+    if edit is not None:
+        edit(ds)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    ds.to_netcdf(dst)
+
+
+def test_navier_stokes_reference_and_particle_figures(sweep, tmp_path):
+    """With Navier-Stokes and particle runs in the inputs (here: global runs relabelled, with a
+    known lee), the reference is chosen automatically and the paper's figures are drawn."""
+
+    def halve_lee(ds):  # the reference sees half the free-stream wind in the lee box
+        lee = (ds["probe_box"] == "lee").values
+        ds["probe_wind"].values[:, lee, :] *= 0.5
+
+    inputs = tmp_path / "inputs"
+    for n in range(4):
+        shutil.copytree(sweep / str(n), inputs / "global" / str(n))
+        _as_backend(
+            sweep / str(n) / "windbench.nc",
+            inputs / "ns" / str(n) / "windbench.nc",
+            "navier_stokes",
+            halve_lee,
+        )
+    opposing = _run(inputs / "opp_global", "scene=opposing_sources", "grid.resolution=20")
+    assert opposing.status == "complete"
+
+    def two_sided(ds):  # what per-source particles give: each side keeps its own source
+        x = ds["x"].values[None, :, None, None]
+        u = np.zeros(ds["wind"].shape)
+        u[..., 0] = np.where(x < 3.7, 4.0, np.where(x > 4.3, -4.0, 0.0))
+        ds["wind"].values[:] = u
+
+    _as_backend(opposing.path, inputs / "opp_particles" / "windbench.nc", "particles", two_sided)
+
+    rep = build_report([inputs], out=tmp_path / "rep", progress=False)
+    summary = rep.summary
+    ref = rep.references["two_flags_wall"]
+    assert ref.settings["wind"] == "navier_stokes" and ref.settings["resolution"] == 16
+    assert ref.settings["dt"] == 0.05  # finest grid, then the smallest time step
+    tfw = summary[summary["scene"] == "two_flags_wall"]
+    glob = tfw[tfw["wind"] == "global"]["lee_error"]
+    # |u - u/2| = 3 m/s everywhere in the lee box, over a free stream of 6 m/s
+    np.testing.assert_allclose(glob, 0.5, rtol=1e-12)
+    np.testing.assert_allclose(tfw[tfw["wind"] == "navier_stokes"]["lee_error"], 0.0, atol=0)
+    assert {"fig45_two_flags_wall", "opposing_sources", "lee_error_vs_resolution"} <= set(rep.drawn)
+    assert "opposing_sources" not in rep.missing
