@@ -236,6 +236,7 @@ def build_report(
             ),
             place(F.fig_cost(complete)),
             Table(exps, "Fitted cost exponents p (time per step ~ cells^p)"),
+            place(F.fig_cost_particles(complete)),
             place(F.fig_lee_error(complete, ref_note)),
             place(F.fig_divergence(complete)),
             place(F.fig_force_ratio_dt(complete)),

@@ -24,6 +24,8 @@ Figures per run (DESIGN.md "Run dataset"):
   (the first includes numba's compile or cache load); ``seconds_per_step`` = phase ``total``;
   ``seconds_per_step_median`` its median over the same steps (robust to other processes on
   a shared machine: the cost figure uses it).
+- every other per-step variable (a backend's ``stats()``, e.g. ``live_particles`` or pressure
+  iterations): its time mean, like the lee figures;
 - ``lee_error`` (see :mod:`windbench.report.lee`).
 """
 
@@ -188,6 +190,10 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
             figs[f"{name}_final"] = float(vals[-1])
         else:
             figs[name] = figs[f"{name}_final"] = math.nan
+    known = {*AVERAGED, "divergence_max"}
+    for name, var in ds.data_vars.items():  # backend figures (stats()): time means
+        if var.dims == ("time",) and name not in known and var.dtype.kind in "fiu":
+            figs[str(name)] = _time_mean(np.asarray(var.values, dtype=float), times)
     if "divergence_max" in ds and ds.sizes.get("time", 0):
         figs["divergence_max"] = float(np.nanmax(ds["divergence_max"].values))
     else:

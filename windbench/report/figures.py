@@ -493,6 +493,37 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
     return Drawn("cost_vs_cells", title, caption, fig)
 
 
+def fig_cost_particles(df: pd.DataFrame) -> Drawn | Missing:
+    """Particle tracing's cost against the number of live particles (scaling study)."""
+    title = "Particle tracing: cost per step against live particles"
+    d = df[(df["wind"] == "particles")] if "live_particles" in df else df.iloc[0:0]
+    d = d[
+        np.isfinite(d.get("live_particles", pd.Series(dtype=float)))
+        & (d.get("live_particles", 0) > 0)
+    ]
+    if d.empty:
+        return Missing(
+            "cost_vs_particles",
+            title,
+            "`particles` runs that record `live_particles`: `windbench -m experiment=scaling`",
+        )
+    fig = _figure(6.4, 4.4)
+    ax = fig.add_subplot()
+    for i, (scene, g) in enumerate(d.groupby("scene", sort=True)):
+        p = fit_exponent(g["live_particles"], g[COST])
+        label = scene + (f": p = {p:.2f}" if np.isfinite(p) else "")
+        ax.loglog(g["live_particles"], g[COST] * 1e3, MARKERS[i % len(MARKERS)], label=label)
+    ax.set_xlabel("live particles (time mean)")
+    ax.set_ylabel("wall time per step (ms)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    caption = (
+        "Median wall time per step of the particle backend against its mean number of live "
+        "particles; p is the fitted exponent of time ~ particles^p."
+    )
+    return Drawn("cost_vs_particles", title, caption, fig)
+
+
 def _against(
     df,
     x,
