@@ -21,7 +21,14 @@ from windbench.cli import compose_config  # noqa: E402
 from windbench.errors import SimulationDiverged  # noqa: E402
 from windbench.report import build_report  # noqa: E402
 from windbench.report.cli import main as report_main  # noqa: E402
-from windbench.report.collect import combine, find_runs, mark_duplicates, read_runs  # noqa: E402
+from windbench.report.collect import (  # noqa: E402
+    combine,
+    find_runs,
+    mark_duplicates,
+    read_runs,
+    summary_frame,
+)
+from windbench.report.lee import assign_lee_errors, choose_references  # noqa: E402
 from windbench.simulate import Simulation, run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -144,17 +151,16 @@ def test_corrupted_and_failed_runs_are_listed_and_do_not_stop_the_report(
     assert "Skipped" in md and str(bad) in md
 
 
-def test_reference_run_has_zero_lee_error_and_others_finite(sweep, tmp_path):
-    ref_dir = sweep / "3"  # resolution 16, dt 0.1: one of the inputs
-    rep = build_report([sweep], out=tmp_path / "rep", reference=ref_dir, progress=False)
-    summary = rep.summary.set_index(["resolution", "dt"])
+def test_reference_run_has_zero_lee_error_and_others_finite(sweep):
+    records = read_runs(find_runs([sweep]))
+    refs = choose_references(records, read_runs(find_runs([sweep / "3"])))  # --reference DIR
+    assign_lee_errors(records, refs)
+    summary = summary_frame(records).set_index(["resolution", "dt"])
     assert summary.loc[(16, 0.1), "lee_error"] == 0.0  # the reference against itself
     assert bool(summary.loc[(16, 0.1), "is_reference"])
+    assert summary["is_reference"].sum() == 1
     # the global field is sampled exactly at the probe points: same wind at every resolution
-    assert np.isfinite(summary["lee_error"]).all()
     np.testing.assert_allclose(summary["lee_error"], 0.0, atol=1e-12)
-    assert "two_flags_wall" in rep.references
-    assert str(ref_dir) in (tmp_path / "rep" / "report.md").read_text()
 
 
 def test_duplicate_runs_are_skipped_not_combined(sweep, tmp_path):
@@ -262,3 +268,5 @@ def test_navier_stokes_reference_and_particle_figures(sweep, tmp_path):
     np.testing.assert_allclose(tfw[tfw["wind"] == "navier_stokes"]["lee_error"], 0.0, atol=0)
     assert {"fig45_two_flags_wall", "opposing_sources", "lee_error_vs_resolution"} <= set(rep.drawn)
     assert "opposing_sources" not in rep.missing
+    md = (tmp_path / "rep" / "report.md").read_text()
+    assert "finest `navier_stokes` run of the scene" in md and str(ref.path) in md

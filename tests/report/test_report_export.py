@@ -51,12 +51,18 @@ def _appended_arrays(path) -> tuple[ET.Element, dict[str, np.ndarray]]:
     return tree, arrays
 
 
+def _series(folder, name, written, times):
+    """The .pvd index's entries, checked against the dataset's times."""
+    assert folder / f"{name}.pvd" in written
+    entries = ET.parse(folder / f"{name}.pvd").getroot().findall("./Collection/DataSet")
+    np.testing.assert_allclose([float(e.get("timestep")) for e in entries], times)
+    return entries
+
+
 def test_wind_snapshots_as_vtk_image_data(exported):
     path, folder, written = exported
-    assert folder / "wind.pvd" in written
     with xr.open_dataset(path) as ds:
-        entries = ET.parse(folder / "wind.pvd").getroot().findall("./Collection/DataSet")
-        np.testing.assert_allclose([float(e.get("timestep")) for e in entries], ds["snapshot_time"])
+        entries = _series(folder, "wind", written, ds["snapshot_time"])
         h = float(ds.attrs["grid_spacing"])
         for k, entry in enumerate(entries):
             tree, arrays = _appended_arrays(folder / entry.get("file"))
@@ -75,10 +81,8 @@ def test_wind_snapshots_as_vtk_image_data(exported):
 
 def test_cloth_as_polydata_series_and_ply(exported):
     path, folder, written = exported
-    assert folder / "cloth.pvd" in written
     with xr.open_dataset(path) as ds:
-        entries = ET.parse(folder / "cloth.pvd").getroot().findall("./Collection/DataSet")
-        np.testing.assert_allclose([float(e.get("timestep")) for e in entries], ds["time"])
+        entries = _series(folder, "cloth", written, ds["time"])
         tris = ds["cloth_triangles"].values
         for i, entry in enumerate(entries):
             pos = ds["cloth_position"].isel(time=i).values

@@ -12,7 +12,7 @@ from omegaconf import OmegaConf
 
 from windbench.aero import AeroParams
 from windbench.cli import compose_config
-from windbench.report.collect import RunRecord, flatten
+from windbench.report.collect import RunRecord, flatten, swept_keys
 from windbench.report.figures import fit_exponent, hoerner_long_plate, plate_table, tagging_field
 from windbench.report.lee import choose_references, lee_error
 
@@ -129,3 +129,22 @@ def test_tagging_gives_the_superposed_wind_on_reached_cells_only():
     np.testing.assert_array_equal(
         tagged[:, 1:], np.broadcast_to([6.0, 0.0, 0.0], tagged[:, 1:].shape)
     )
+
+
+def test_swept_keys_are_the_settings_plus_config_keys_that_vary():
+    def rec(lift, domain, res):
+        cfg = {"aero.lift_coefficient": lift, "scene.domain.max": domain, "grid.resolution": res}
+        r = RunRecord(Path(f"/r/{lift}{domain}{res}"), "complete", config=cfg)
+        r.settings = {
+            "wind": "global",
+            "scene": str(domain),
+            "resolution": res,
+            "dt": 0.1,
+            "seed": 0,
+        }
+        return r
+
+    runs = [rec(0.3, (8, 4, 4), 16), rec(0.6, (6, 3, 3), 16), rec(0.6, (8, 4, 4), 32)]
+    dims = swept_keys(runs)
+    # scene contents follow from the scene; resolution is a canonical setting already
+    assert dims == ["wind", "scene", "resolution", "dt", "seed", "aero.lift_coefficient"]

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -524,24 +524,12 @@ def fig_cost_particles(df: pd.DataFrame) -> Drawn | Missing:
     return Drawn("cost_vs_particles", title, caption, fig)
 
 
-def _against(
-    df,
-    x,
-    y,
-    name,
-    title,
-    xlabel,
-    ylabel,
-    caption,
-    needs,
-    logx=False,
-    logy=True,
-    by=("wind", "scene"),
-):
+def _against(df: pd.DataFrame, spec: Against) -> Drawn | Missing:
     """y against x, one line per group of ``by`` (means over the other settings)."""
+    x, y, by = spec.x, spec.y, spec.by
     d = df[np.isfinite(df[y].astype(float))] if y in df else df.iloc[0:0]
     if d.empty:
-        return Missing(name, title, needs)
+        return Missing(spec.name, spec.title, spec.needs)
     fig = _figure(6.4, 4.4)
     ax = fig.add_subplot()
     scenes = sorted(d["scene"].unique())
@@ -558,61 +546,65 @@ def _against(
             color=_color(wind),
             label=f"{wind} / {scene}{extra}",
         )
-    if logy and (d[y] > 0).all():
+    if spec.logy and (d[y] > 0).all():
         ax.set_yscale("log")
-    elif not logy:
+    elif not spec.logy:
         ax.set_ylim(bottom=0, top=max(1.1, float(d[y].max()) * 1.1))
-    if logx:
+    if spec.logx:
         ax.set_xscale("log")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
+    ax.set_xlabel(spec.xlabel)
+    ax.set_ylabel(spec.ylabel)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    return Drawn(name, title, caption, fig)
+    return Drawn(spec.name, spec.title, spec.caption, fig)
 
 
-def fig_lee_error(df: pd.DataFrame, reference_note: str) -> Drawn | Missing:
-    d = (
-        df[~df.get("is_reference", pd.Series(False, index=df.index)).astype(bool)]
-        if len(df)
-        else df
-    )
-    return _against(
-        d,
+@dataclass(frozen=True)
+class Against:
+    """One §4.3 plot of a run figure against a setting (see :func:`_against`)."""
+
+    name: str
+    x: str
+    y: str
+    title: str
+    xlabel: str
+    ylabel: str
+    caption: str
+    needs: str
+    logx: bool = False
+    logy: bool = True
+    by: tuple[str, ...] = ("wind", "scene")
+
+
+ALL_RUNS = "complete runs: `windbench -m experiment=paper`"
+MEASURED = {
+    "lee_error": Against(
+        "lee_error_vs_resolution",
         "resolution",
         "lee_error",
-        "lee_error_vs_resolution",
         "Lee-zone error against resolution",
         "grid.resolution (cells along the longest axis)",
         "lee error (RMS |u − u_ref| / U_free)",
         "RMS difference from the reference wind over the lee probe points at the last "
-        f"snapshot, divided by the free-stream speed. {reference_note}",
+        "snapshot, divided by the free-stream speed.",
         "a `navier_stokes` run of the same scene as reference (or `--reference DIR`) and runs "
         "to compare: `windbench -m experiment=paper`",
-    )
-
-
-def fig_divergence(df: pd.DataFrame) -> Drawn | Missing:
-    return _against(
-        df,
+    ),
+    "divergence": Against(
+        "divergence_vs_resolution",
         "resolution",
         "divergence_rms",
-        "divergence_vs_resolution",
         "Divergence against resolution",
         "grid.resolution (cells along the longest axis)",
         "RMS |div u| h / U_ref",
         "Time mean (second half of the run) of the RMS of |div u| h / U_ref over interior "
         "air cells (eq. 4.1 asks for 0).",
-        "complete runs: `windbench -m experiment=paper`",
-    )
-
-
-def fig_force_ratio_dt(df: pd.DataFrame) -> Drawn | Missing:
-    return _against(
-        df,
+        ALL_RUNS,
+    ),
+    "force_ratio": Against(
+        "lee_force_ratio_vs_dt",
         "dt",
         "lee_force_ratio",
-        "lee_force_ratio_vs_dt",
         "Lee force ratio against time step",
         "sim.dt (s)",
         "|F sheltered| / |F exposed|",
@@ -622,7 +614,23 @@ def fig_force_ratio_dt(df: pd.DataFrame) -> Drawn | Missing:
         logx=True,
         logy=False,
         by=("wind", "scene", "resolution"),
-    )
+    ),
+}
+
+
+def fig_lee_error(df: pd.DataFrame, reference_note: str) -> Drawn | Missing:
+    """Lee error against resolution, the reference run itself left out (it is 0)."""
+    d = df[~df["is_reference"].astype(bool)] if "is_reference" in df else df
+    spec = MEASURED["lee_error"]
+    return _against(d, replace(spec, caption=f"{spec.caption} {reference_note}"))
+
+
+def fig_divergence(df: pd.DataFrame) -> Drawn | Missing:
+    return _against(df, MEASURED["divergence"])
+
+
+def fig_force_ratio_dt(df: pd.DataFrame) -> Drawn | Missing:
+    return _against(df, MEASURED["force_ratio"])
 
 
 def hoerner_long_plate(alpha):
