@@ -22,6 +22,7 @@ from windbench.report.collect import (
     AVERAGE_FROM,
     RunRecord,
     combine,
+    display_path,
     find_invalid,
     find_runs,
     mark_duplicates,
@@ -105,6 +106,29 @@ def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
     out.insert(0, "runs", g.size())
     out.insert(1, "cells", g["grid_cells"].first())
     return out.reset_index()
+
+
+def lee_at_a_glance(df: pd.DataFrame) -> pd.DataFrame:
+    """Per scene and backend, the finest run's lee speed ratio (and force ratio, if any)."""
+    if df.empty:
+        return df
+    d = df.sort_values(["resolution", "dt"], ascending=[False, True])
+    finest = d.groupby(["scene", "wind"], sort=True).head(1)
+    rows = []
+    for scene, g in finest.groupby("scene", sort=True):
+        row = {"scene": scene}
+        for _, r in g.iterrows():
+            row[f"{r['wind']} speed"] = r["lee_speed_ratio"]
+            if np.isfinite(r.get("lee_force_ratio", np.nan)):
+                row[f"{r['wind']} force"] = r["lee_force_ratio"]
+        rows.append(row)
+    out = pd.DataFrame(rows)
+    order = {w: i for i, w in enumerate(F.BACKEND_COLORS)}
+    cols = sorted(
+        (c for c in out if c != "scene"),
+        key=lambda c: (order.get(c.rsplit(" ", 1)[0], 9), c.rsplit(" ", 1)[0], c.endswith("force")),
+    )
+    return out[["scene", *cols]]
 
 
 def _short(text, limit: int = 240) -> str:
@@ -191,9 +215,11 @@ def build_report(
             Text(
                 f"Figures per run: lee and divergence figures are time means over the second "
                 f"half of each run (t >= {AVERAGE_FROM:g} t_end); time per step is the mean "
-                "wall time over every step but the first (which includes numba's compile or "
-                "cache load). Files: `results.nc` (combined), `summary.csv` (one row per run), "
-                "`figures/` (PNG and SVG)."
+                "(`seconds_per_step`) and the median (`seconds_per_step_median`, used in the "
+                "cost figures and tables: robust to other processes) of the wall time over "
+                "every step but the first (which includes numba's compile or cache load). "
+                "Files: `results.nc` (combined), `summary.csv` (one row per run), `figures/` "
+                "(PNG and SVG)."
             ),
             Text(ref_note),
         ],
@@ -203,13 +229,21 @@ def build_report(
             Table(
                 pd.DataFrame(
                     [
-                        {"scene": s, "reference run": r.label, "file": str(r.path)}
+                        {"scene": s, "reference run": r.label, "file": display_path(r.path)}
                         for s, r in sorted(refs.items())
                     ]
                 ),
                 "Lee-error references",
             )
         )
+    overview.blocks.append(
+        Table(
+            lee_at_a_glance(complete),
+            "Lee at a glance: mean |u| in the lee box / in the free stream (speed) and |F| on "
+            "the sheltered / exposed cloth (force), finest run of each backend; 1 = no lee, "
+            "0 = full shelter",
+        )
+    )
     records_ok = [r for r in records if r.status == "complete"]
     paper = Section(
         "The paper's figures (§5)",
@@ -259,7 +293,11 @@ def build_report(
             Table(
                 pd.DataFrame(
                     [
-                        {"file": str(r.path), "status": r.status, "reason": _short(r.reason)}
+                        {
+                            "file": display_path(r.path),
+                            "status": r.status,
+                            "reason": _short(r.reason),
+                        }
                         for r in skipped
                     ]
                 ),

@@ -330,6 +330,14 @@ def mark_duplicates(records: list[RunRecord]) -> None:
             seen[key] = rec
 
 
+def display_path(path: Path) -> str:
+    """Relative to the working folder when below it (a committed report names no home dirs)."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def _setting(rec: RunRecord, name: str):
     if name in SETTINGS:
         return rec.settings.get(name)
@@ -363,7 +371,7 @@ def summary_frame(records: Sequence[RunRecord]) -> pd.DataFrame:
         for ph, sec in rec.phases.items():
             row[f"step_seconds_{ph}"] = sec
         row.update(status=rec.status, failure=rec.reason, experiment=rec.experiment)
-        row["path"] = str(rec.path)
+        row["path"] = display_path(rec.path)
         rows.append(row)
     df = pd.DataFrame(rows)
     front = [*dims, "status", "failure"]
@@ -386,6 +394,9 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     for c in dims:  # tuples (list-valued settings) are not netCDF values
         if df[c].map(lambda v: isinstance(v, tuple)).any():
             df[c] = df[c].map(str)
+    for c in df:  # flags as 0/1 so that a missing combination can be NaN
+        if df[c].map(lambda v: isinstance(v, bool | np.bool_)).all():
+            df[c] = df[c].astype(float)
     ds = xr.Dataset.from_dataframe(df.set_index(dims))
     phase_rows = [
         {**{d: _setting(r, d) for d in dims}, "phase": ph, "step_seconds": sec}

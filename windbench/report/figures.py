@@ -61,12 +61,15 @@ def _color(wind: str) -> str:
 
 
 def save(fig: Figure, folder: Path, name: str) -> list[Path]:
+    import matplotlib
+
     folder.mkdir(parents=True, exist_ok=True)
     out = []
-    for ext in ("png", "svg"):
-        path = folder / f"{name}.{ext}"
-        fig.savefig(path, dpi=110, bbox_inches="tight", metadata=_metadata(ext))
-        out.append(path)
+    with matplotlib.rc_context({"svg.hashsalt": "windbench"}):  # stable SVG ids
+        for ext in ("png", "svg"):
+            path = folder / f"{name}.{ext}"
+            fig.savefig(path, dpi=110, bbox_inches="tight", metadata=_metadata(ext))
+            out.append(path)
     return out
 
 
@@ -482,15 +485,19 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
             color=_color(wind),
             label=label,
         )
-    ax.set_xlabel("grid cells")
-    ax.set_ylabel("wall time per step (ms)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
     caption = (
         "Median wall time per step (all phases, first step excluded) against the number of "
         "grid cells; p is the fitted exponent of time ~ cells^p."
     )
-    return Drawn("cost_vs_cells", title, caption, fig)
+    return _cost_drawn(ax, "grid cells", Drawn("cost_vs_cells", title, caption, fig))
+
+
+def _cost_drawn(ax, xlabel: str, drawn: Drawn) -> Drawn:
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("wall time per step (ms)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    return drawn
 
 
 def fig_cost_particles(df: pd.DataFrame) -> Drawn | Missing:
@@ -513,15 +520,12 @@ def fig_cost_particles(df: pd.DataFrame) -> Drawn | Missing:
         p = fit_exponent(g["live_particles"], g[COST])
         label = scene + (f": p = {p:.2f}" if np.isfinite(p) else "")
         ax.loglog(g["live_particles"], g[COST] * 1e3, MARKERS[i % len(MARKERS)], label=label)
-    ax.set_xlabel("live particles (time mean)")
-    ax.set_ylabel("wall time per step (ms)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
     caption = (
         "Median wall time per step of the particle backend against its mean number of live "
         "particles; p is the fitted exponent of time ~ particles^p."
     )
-    return Drawn("cost_vs_particles", title, caption, fig)
+    drawn = Drawn("cost_vs_particles", title, caption, fig)
+    return _cost_drawn(ax, "live particles (time mean)", drawn)
 
 
 def _against(df: pd.DataFrame, spec: Against) -> Drawn | Missing:
