@@ -68,8 +68,10 @@ def test_reference_is_the_finest_navier_stokes_run_of_each_scene(lattice):
     refs = choose_references(runs)
     assert refs["fence"] is runs[2]
     assert "flag" not in refs  # no Navier-Stokes run of the flag: no reference
-    # given a reference folder, its finest run serves even when it is not Navier-Stokes
-    assert choose_references(runs, [runs[4]])["flag"] is runs[4]
+    # given a reference folder, its finest run serves even when it is not Navier-Stokes;
+    # scenes it lacks keep the inputs' Navier-Stokes reference
+    given = choose_references(runs, [runs[4]])
+    assert given["flag"] is runs[4] and given["fence"] is runs[2]
 
 
 def test_fit_exponent_recovers_a_power_law():

@@ -35,22 +35,28 @@ def _finest_key(rec: RunRecord):
     )
 
 
+def _finest_per_scene(pool: Sequence[RunRecord], only_ns: bool) -> dict[str, RunRecord]:
+    pool = [r for r in pool if r.status == "complete" and r.lee_points is not None]
+    refs: dict[str, RunRecord] = {}
+    for scene in sorted({str(r.settings.get("scene")) for r in pool}):
+        here = [r for r in pool if str(r.settings.get("scene")) == scene]
+        ns = [r for r in here if r.settings.get("wind") == REFERENCE_BACKEND]
+        if ns or not only_ns:
+            refs[scene] = min(ns or here, key=_finest_key)
+    return refs
+
+
 def choose_references(
     records: Sequence[RunRecord], reference_records: Sequence[RunRecord] | None = None
 ) -> dict[str, RunRecord]:
-    """scene -> reference run (see module docstring); scenes without one are absent."""
-    pool = [r for r in (reference_records if reference_records is not None else records)]
-    pool = [r for r in pool if r.status == "complete" and r.lee_points is not None]
-    refs: dict[str, RunRecord] = {}
-    for scene in sorted({r.settings.get("scene") for r in pool}):
-        here = [r for r in pool if r.settings.get("scene") == scene]
-        ns = [r for r in here if r.settings.get("wind") == REFERENCE_BACKEND]
-        if reference_records is None:
-            here = ns
-        elif ns:
-            here = ns
-        if here:
-            refs[scene] = min(here, key=_finest_key)
+    """scene -> reference run (see module docstring); scenes without one are absent.
+
+    Runs under ``--reference`` win for their scenes; other scenes keep the finest
+    ``navier_stokes`` run among the inputs.
+    """
+    refs = _finest_per_scene(records, only_ns=True)
+    if reference_records is not None:
+        refs.update(_finest_per_scene(reference_records, only_ns=False))
     return refs
 
 
