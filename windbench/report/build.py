@@ -81,11 +81,9 @@ def _reference_note(refs: dict[str, RunRecord], reference_dir) -> str:
             + (f" and none readable under `{reference_dir}`" if reference_dir else "")
             + ", so `lee_error` is empty."
         )
-    src = (
-        f"the finest run under `--reference {reference_dir}`"
-        if reference_dir
-        else ("the finest `navier_stokes` run of the scene among the inputs")
-    )
+    src = "the finest `navier_stokes` run of the scene among the inputs"
+    if reference_dir:
+        src = f"the finest run of the scene under `--reference {reference_dir}`, else " + src
     return f"Reference for `lee_error`: {src}."
 
 
