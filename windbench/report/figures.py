@@ -136,7 +136,7 @@ def _draw_bodies_3d(ax, scene: Scene):
             )
         elif body.kind in ("cylinder", "capsule"):
             a, b = p[0:3], p[3:6]
-            ax.plot(*zip(a, b, strict=True), color="0.3", lw=2.0)
+            ax.plot(*zip(a, b, strict=True), color="0.45", lw=2.0 + 50.0 * p[6], alpha=0.8)
 
 
 def _draw_cloth_3d(ax, positions, triangles, color="tab:red"):
