@@ -19,7 +19,7 @@ import xarray as xr  # noqa: E402
 
 from windbench.cli import compose_config  # noqa: E402
 from windbench.errors import SimulationDiverged  # noqa: E402
-from windbench.report import build_report  # noqa: E402
+from windbench.report import build_report, figures  # noqa: E402
 from windbench.report.cli import main as report_main  # noqa: E402
 from windbench.report.collect import (  # noqa: E402
     combine,
@@ -134,6 +134,10 @@ def test_corrupted_and_failed_runs_are_listed_and_do_not_stop_the_report(
     failed = _run(inputs / "failed", "scene=two_flags_wall", "grid.resolution=12", "sim.dt=0.05")
     assert failed.status == "failed"
 
+    def broken(records):
+        raise RuntimeError("boom")
+
+    monkeypatch.setitem(figures.RUN_FIGURES, "fig45_two_flags_wall", broken)
     code = report_main([str(inputs), "--out", str(tmp_path / "rep"), "--quiet"])
     assert code == 0
     out = capsys.readouterr().out
@@ -149,6 +153,7 @@ def test_corrupted_and_failed_runs_are_listed_and_do_not_stop_the_report(
         assert ds.attrs["runs"] == 1  # only the complete run is combined
     md = (tmp_path / "rep" / "report.md").read_text()
     assert "Skipped" in md and str(bad) in md
+    assert "drawing failed (RuntimeError: boom)" in md  # one broken figure, the report stands
 
 
 def test_reference_run_has_zero_lee_error_and_others_finite(sweep):

@@ -193,7 +193,7 @@ def build_report(
     def place(result) -> FigureRef | Note:
         if isinstance(result, F.Missing):
             report.missing.append(result.name)
-            return Note(result.title, result.needs)
+            return Note(result.title, result.needs, result.error)
         F.save(result.figure, fig_dir, result.name)
         report.drawn.append(result.name)
         return FigureRef(result.name, result.title, result.caption)
@@ -251,11 +251,7 @@ def build_report(
                 "Drawn from the run datasets; each needs particular runs, and says which when "
                 f"they are missing (`{PAPER_COMMAND}` makes them all)."
             ),
-            place(F.fig3_flag(records_ok)),
-            place(F.fig45_two_flags_wall(records_ok)),
-            place(F.fig6_shirt(records_ok)),
-            place(F.fig_opposing_sources(records_ok)),
-            place(F.fig_lee_in_time(records_ok)),
+            *(place(F.attempt(name, records_ok)) for name in F.RUN_FIGURES),
         ],
     )
     exps = F.cost_exponents(complete) if len(complete) else pd.DataFrame()

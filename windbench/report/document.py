@@ -39,6 +39,13 @@ class FigureRef:
 class Note:
     title: str
     text: str
+    error: str = ""
+
+    @property
+    def message(self) -> str:
+        if self.error:
+            return f"Not drawn: drawing failed ({self.error})."
+        return f"Not drawn: needs {self.text}."
 
 
 @dataclass
@@ -90,7 +97,7 @@ def to_markdown(title: str, sections: list[Section]) -> str:
                     "",
                 ]
             elif isinstance(b, Note):
-                out += [f"### {b.title}", "", f"*Not drawn: needs {b.text}.*", ""]
+                out += [f"### {b.title}", "", f"*{b.message}*", ""]
     return "\n".join(out).rstrip() + "\n"
 
 
@@ -141,8 +148,6 @@ def to_html(title: str, sections: list[Section], figures_dir: Path) -> str:
                     f"<figcaption>{_inline(b.caption)}</figcaption></figure>"
                 )
             elif isinstance(b, Note):
-                out.append(
-                    f"<h3>{_inline(b.title)}</h3><p class='note'>Not drawn: needs {_inline(b.text)}.</p>"
-                )
+                out.append(f"<h3>{_inline(b.title)}</h3><p class='note'>{_inline(b.message)}</p>")
     out.append("</body></html>")
     return "\n".join(out) + "\n"

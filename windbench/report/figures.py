@@ -54,6 +54,25 @@ class Missing:
     name: str
     title: str
     needs: str  # which runs would produce it, with the command
+    error: str = ""  # set when the runs were there but drawing failed
+
+
+TITLES = {
+    "fig3_flag": "Fig. 3 — flag in the wind",
+    "fig45_two_flags_wall": "Figs. 4 and 5 — two flags and a wall",
+    "fig6_shirt": "Fig. 6 — shirt with lee (particles) and without (global)",
+    "opposing_sources": "§4.2.2 — opposing sources: per-source particles vs. tagging with w = Σ wᵢ",
+    "lee_in_time": "Lee speed ratio in time",
+}
+
+
+def attempt(name: str, records) -> Drawn | Missing:
+    """Draw the run figure ``name`` (see :data:`RUN_FIGURES`), or a :class:`Missing` with the
+    error if drawing fails: a report with one figure missing beats no report."""
+    try:
+        return RUN_FIGURES[name](records)
+    except Exception as err:  # noqa: BLE001 - reported in the page
+        return Missing(name, TITLES[name], "", error=f"{type(err).__name__}: {err}")
 
 
 def _color(wind: str) -> str:
@@ -230,7 +249,7 @@ def _run_note(rec: RunRecord) -> str:
 
 def fig3_flag(records: Sequence[RunRecord]) -> Drawn | Missing:
     """Fig. 3: the flag in the wind (particle tracing), a few frames in time."""
-    title = "Fig. 3 — flag in the wind"
+    title = TITLES["fig3_flag"]
     rec = pick(records, "flag", "particles")
     fallback = rec is None
     if fallback:
@@ -318,7 +337,7 @@ def _lee_panels(records, scene_name, winds, name, title, rows_3d_times=("last",)
 
 def fig45_two_flags_wall(records: Sequence[RunRecord]) -> Drawn | Missing:
     """Figs. 4/5: two flags and a wall; Navier-Stokes beside particle tracing (and global)."""
-    title = "Figs. 4 and 5 — two flags and a wall"
+    title = TITLES["fig45_two_flags_wall"]
     winds = ("navier_stokes", "particles", "global")
     fig, present, absent = _lee_panels(records, "two_flags_wall", winds, "fig45", title)
     if fig is None:
@@ -340,7 +359,7 @@ def fig45_two_flags_wall(records: Sequence[RunRecord]) -> Drawn | Missing:
 
 def fig6_shirt(records: Sequence[RunRecord]) -> Drawn | Missing:
     """Fig. 6: the shirt with lee (particles) beside the shirt without (global)."""
-    title = "Fig. 6 — shirt with lee (particles) and without (global)"
+    title = TITLES["fig6_shirt"]
     present = [(w, pick(records, "shirt", w)) for w in ("particles", "global")]
     present = [(w, r) for w, r in present if r is not None]
     if not present:
@@ -393,7 +412,7 @@ def tagging_field(ds: xr.Dataset) -> np.ndarray:
 
 def fig_opposing_sources(records: Sequence[RunRecord]) -> Drawn | Missing:
     """§4.2.2: per-source particles beside cell tagging with the superposed field."""
-    title = "§4.2.2 — opposing sources: per-source particles vs. tagging with w = Σ wᵢ"
+    title = TITLES["opposing_sources"]
     rec = pick(records, "opposing_sources", "particles")
     if rec is None:
         return Missing(
@@ -700,7 +719,7 @@ def fig_plate(params: AeroParams) -> Drawn:
 
 def fig_lee_in_time(records: Sequence[RunRecord]) -> Drawn | Missing:
     """lee_speed_ratio against time, the finest run of each backend, one panel per scene."""
-    title = "Lee speed ratio in time"
+    title = TITLES["lee_in_time"]
     good = [r for r in records if r.status == "complete"]
     scenes = sorted(
         {r.settings["scene"] for r in good if np.isfinite(r.figures.get("lee_speed_ratio", np.nan))}
@@ -732,3 +751,12 @@ def fig_lee_in_time(records: Sequence[RunRecord]) -> Drawn | Missing:
         "of each backend; 1 means no lee, 0 a perfect wind shadow."
     )
     return Drawn("lee_in_time", title, caption, fig)
+
+
+RUN_FIGURES = {  # figures drawn from run datasets, in the order of the report
+    "fig3_flag": fig3_flag,
+    "fig45_two_flags_wall": fig45_two_flags_wall,
+    "fig6_shirt": fig6_shirt,
+    "opposing_sources": fig_opposing_sources,
+    "lee_in_time": fig_lee_in_time,
+}
