@@ -87,7 +87,7 @@ def save(fig: Figure, folder: Path, name: str) -> list[Path]:
     with matplotlib.rc_context({"svg.hashsalt": "windbench"}):  # stable SVG ids
         for ext in ("png", "svg"):
             path = folder / f"{name}.{ext}"
-            fig.savefig(path, dpi=110, metadata=_metadata(ext))
+            fig.savefig(path, dpi=110, bbox_inches="tight", metadata=_metadata(ext))
             out.append(path)
     return out
 
