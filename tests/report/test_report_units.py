@@ -19,7 +19,7 @@ from windbench.report.lee import choose_references, lee_error
 
 def _record(points, u, free=6.0, **settings) -> RunRecord:
     rec = RunRecord(Path(f"/runs/{settings}/windbench.nc"), "complete", settings=settings)
-    rec.lee_points, rec.lee_wind, rec.free_stream_speed = points, u, free
+    rec.lee_points, rec.lee_wind, rec.reference_speed = points, u, free
     return rec
 
 

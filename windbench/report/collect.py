@@ -23,7 +23,8 @@ Figures per run (DESIGN.md "Run dataset"):
 - ``step_seconds_<phase>``: mean wall time per step and phase over every step but the first
   (the first includes numba's compile or cache load); ``seconds_per_step`` = phase ``total``;
   ``seconds_per_step_median`` its median over the same steps (robust to other processes on
-  a shared machine: the cost figure uses it).
+  a shared machine), ``wind_seconds_median`` the same for the wind phase alone (the
+  backend's own cost: the cost figure uses it).
 - every other per-step variable (a backend's ``stats()``, e.g. ``live_particles`` or pressure
   iterations): its time mean, like the lee figures;
 - ``lee_error`` (see :mod:`windbench.report.lee`).
@@ -205,10 +206,11 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
         for j, ph in enumerate(ds["phase"].values):
             phases[str(ph)] = float(steady[:, j].mean())
     figs["seconds_per_step"] = phases.get("total", math.nan)
-    figs["seconds_per_step_median"] = math.nan
-    if "total" in phases:
-        j = [str(p) for p in ds["phase"].values].index("total")
-        figs["seconds_per_step_median"] = float(np.median(steady[:, j]))
+    figs["seconds_per_step_median"] = figs["wind_seconds_median"] = math.nan
+    names = [str(p) for p in ds["phase"].values] if phases else []
+    for phase, key in (("total", "seconds_per_step_median"), ("wind", "wind_seconds_median")):
+        if phase in names:
+            figs[key] = float(np.median(steady[:, names.index(phase)]))
     shape = ds.attrs.get("grid_shape")
     shape = (
         [int(v) for v in np.atleast_1d(shape)] if shape is not None else list(ds["wind"].shape[1:4])
@@ -423,6 +425,7 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
         "lee_error": "1",
         "seconds_per_step": "s",
         "seconds_per_step_median": "s",
+        "wind_seconds_median": "s",
         "grid_spacing": "m",
     }
     for name, unit in units.items():

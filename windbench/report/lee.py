@@ -2,8 +2,10 @@
 
 ``lee_error = sqrt(mean_p |u_run(p) - u_ref(p)|^2) / U_free`` over the probe points ``p`` of
 the scene's ``lee`` box that both runs share, at each run's last wind snapshot; ``U_free`` is
-the reference's mean speed over its ``free_stream`` probe points (the scene's
-``reference_speed`` if that is zero). The probe lattice depends only on the scene and
+the scene's nominal free-stream speed, its ``reference_speed`` (the fastest source's speed
+unless the scene sets it; the same U_ref that scales the divergence figures). The measured
+speed in the ``free_stream`` box is not used: where flows meet (``opposing_sources``) the
+Navier-Stokes air there can all but stop, and dividing by it would blow the error up. The probe lattice depends only on the scene and
 ``output.probe_points``, not on the grid, so runs at different resolutions and with different
 backends compare point by point.
 
@@ -74,9 +76,9 @@ def lee_error(run: RunRecord, ref: RunRecord) -> float:
         return math.nan
     mine, theirs = np.asarray(pairs).T
     diff = run.lee_wind[mine] - ref.lee_wind[theirs]
-    u_free = ref.free_stream_speed
+    u_free = ref.reference_speed
     if not (u_free > 0):
-        u_free = ref.reference_speed
+        u_free = ref.free_stream_speed  # a dataset without the attribute
     if not (u_free > 0):
         return math.nan
     return float(np.sqrt(np.mean(np.sum(diff * diff, axis=1))) / u_free)
