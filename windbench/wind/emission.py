@@ -1,0 +1,309 @@
+"""Where, how many and when each wind source emits its gust particles (paper §4.2.2).
+
+"In our model every wind source is also a particle source ... The specific emission
+intervals and amounts depend on the properties of the flow sources." An :class:`Emitter`
+is the model of one source's emission; :func:`emitters_from_scene` builds one per scene
+source from the ``wind`` config and the source's optional ``emit`` / ``gusts`` keys.
+
+Regions (the default per source kind; ``emit.box`` replaces it for any kind):
+
+============ ==============================================================================
+``uniform``  the domain faces the wind blows in through (``U . n_out < 0``), each weighted
+             by its flux ``|U . n| * area``, so that the particle density is uniform in the
+             volume. For ``U = (6, 0, 0)`` that is the ``x_min`` face alone.
+``source``   a sphere of radius ``emit.radius`` (default ``max(core_radius, h / 2)``)
+             around its centre; the particles move outward along w_i.
+``sink``     all six domain faces, area-weighted: air drawn in from everywhere.
+``vortex``   a cylinder around its core line, radius ``emit.radius`` (default: out to the
+             farthest domain corner), the length of the core inside the domain; uniform
+             in volume. Particles circle the core until they leave or age out.
+``emit.box`` ``{min: [x, y, z], max: [x, y, z]}``: uniform in this axis-aligned box; a box
+             flat along one axis is a rectangle (e.g. a nozzle).
+============ ==============================================================================
+
+Per-source keys (all optional) in the scene's ``sources`` entries::
+
+    emit:   {rate: 2000.0, radius: 0.5, box: {min: [...], max: [...]}}
+    gusts:  {on: 1.0, off: 2.0, start: 0.0}
+
+``emit.rate`` is particles per second while the source emits (default
+``wind.particles_per_second``, or, when that is null, the automatic rate below);
+``gusts`` makes the wind come in gusts: emission during ``[start + k P, start + k P + on)``
+with ``P = on + off``, k = 0, 1, 2, ... and nothing before ``start``.
+
+Automatic rate: ``wind.particles_per_cell * A / (h^2 * wind.memory)``, i.e. each cell of
+the emitting cross-section ``A`` is crossed by about ``particles_per_cell`` new particles
+per memory window, so that a steady gust keeps every cell it reaches marked. ``A`` is the
+flux-weighted inflow cross-section for a uniform source, the whole boundary for a sink and
+the domain's largest face for a point source or vortex (a heuristic: their particles spread).
+
+Positions and emission instants come from the 4-D additive-recurrence (Kronecker)
+sequence of Roberts ("R_d", generalised golden ratio) with a seeded random shift per
+source: a low-discrepancy stratification, so every cell of the emitting surface receives
+particles at regular intervals (plain random emission leaves Poisson gaps), and the same
+seed gives the same particles bit for bit. Candidates that fall outside the grid or inside
+a rigid body are dropped (``rate`` counts candidates).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from windbench.errors import ConfigError
+
+FACES, BOX, SPHERE, CYLINDER = "faces", "box", "sphere", "cylinder"
+EMIT_KEYS = {"rate", "radius", "box"}
+GUST_KEYS = {"on", "off", "start"}
+SEQUENCE_DIM = 4  # three position coordinates + the emission instant within the step
+
+
+def _golden_alpha(dim: int) -> np.ndarray:
+    """Roberts' R_d increments (1/phi_d)^k, phi_d the positive root of x^(d+1) = x + 1."""
+    phi = 2.0
+    for _ in range(64):  # fixed-point iteration phi = (1 + phi)^(1/(d+1)), converges fast
+        phi = (1.0 + phi) ** (1.0 / (dim + 1))
+    return (1.0 / phi) ** np.arange(1, dim + 1)
+
+
+ALPHA = _golden_alpha(SEQUENCE_DIM)
+
+
+@dataclass(frozen=True)
+class GustSchedule:
+    """On/off emission intervals: on during [start + k (on + off), ... + on), k >= 0."""
+
+    on: float = np.inf
+    off: float = 0.0
+    start: float = 0.0
+
+    def on_time(self, t: float) -> float:
+        """Cumulative emitting time F(t) in [start, t] (s)."""
+        if t <= self.start:
+            return 0.0
+        if not np.isfinite(self.on):
+            return t - self.start
+        period = self.on + self.off
+        k, r = divmod(t - self.start, period)
+        return k * self.on + min(r, self.on)
+
+    def instant(self, c: np.ndarray) -> np.ndarray:
+        """Inverse of F: the time at which the cumulative emitting time reaches ``c``."""
+        if not np.isfinite(self.on):
+            return self.start + c
+        k, r = np.divmod(c, self.on)
+        return self.start + k * (self.on + self.off) + r
+
+
+@dataclass(frozen=True)
+class Emitter:
+    """Model of one source's emission: region, rate (1/s), gusts and sequence shift."""
+
+    source: int
+    region: str
+    rate: float
+    gusts: GustSchedule
+    shift: np.ndarray  # (SEQUENCE_DIM,) Cranley-Patterson rotation of the sequence
+    # region geometry: faces -> rows (axis, coord, lo0, hi0, lo1, hi1, weight);
+    # box -> (min, max); sphere -> (centre, radius); cylinder -> (point, axis, s0, s1, R)
+    geometry: tuple
+
+    def points(self, u: np.ndarray) -> np.ndarray:
+        """Map sequence points ``u`` ``(n, >= 3)`` in [0, 1) to positions ``(n, 3)``."""
+        n = u.shape[0]
+        out = np.empty((n, 3))
+        if self.region == BOX:
+            lo, hi = self.geometry
+            return lo + u[:, :3] * (hi - lo)
+        if self.region == SPHERE:
+            centre, radius = self.geometry
+            cos_t = 1.0 - 2.0 * u[:, 0]
+            sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
+            phi = 2.0 * np.pi * u[:, 1]
+            out[:, 0] = sin_t * np.cos(phi)
+            out[:, 1] = sin_t * np.sin(phi)
+            out[:, 2] = cos_t
+            return centre + radius * out
+        if self.region == CYLINDER:
+            point, axis, s0, s1, radius = self.geometry
+            e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(axis, e1)
+            s = s0 + (s1 - s0) * u[:, 0]
+            r = radius * np.sqrt(u[:, 1])  # uniform in the disc's area
+            phi = 2.0 * np.pi * u[:, 2]
+            return (
+                point
+                + s[:, None] * axis
+                + (r * np.cos(phi))[:, None] * e1
+                + (r * np.sin(phi))[:, None] * e2
+            )
+        # FACES: u0 picks the face (by cumulative weight) and its first coordinate
+        rows = self.geometry[0]
+        cum = np.concatenate([[0.0], np.cumsum(rows[:, 6])])
+        cum /= cum[-1]
+        face = np.clip(np.searchsorted(cum, u[:, 0], side="right") - 1, 0, len(rows) - 1)
+        f0 = (u[:, 0] - cum[face]) / (cum[face + 1] - cum[face])
+        for idx, row in enumerate(rows):
+            sel = face == idx
+            axis = int(row[0])
+            a, b = (axis + 1) % 3, (axis + 2) % 3
+            out[sel, axis] = row[1]
+            out[sel, a] = row[2] + f0[sel] * (row[3] - row[2])
+            out[sel, b] = row[4] + u[sel, 1] * (row[5] - row[4])
+        return out
+
+    def emit(self, t0: float, t1: float, carry: float, counter: int):
+        """Candidates emitted in [t0, t1): (positions, emission instants, carry, counter).
+
+        The number is ``rate * (on-time in the step) + carry`` rounded down; the fraction is
+        carried to the next step, so the long-run count is exact.
+        """
+        f0, f1 = self.gusts.on_time(t0), self.gusts.on_time(t1)
+        expected = self.rate * (f1 - f0) + carry
+        n = int(np.floor(expected))
+        carry = expected - n
+        idx = counter + np.arange(n, dtype=np.float64)
+        u = np.mod(self.shift + idx[:, None] * ALPHA, 1.0)
+        instants = self.gusts.instant(f0 + u[:, 3] * (f1 - f0))
+        return self.points(u), np.clip(instants, t0, t1), carry, counter + n
+
+
+def _face_rows(lower, upper, weights) -> np.ndarray:
+    """Rows (axis, coord, lo_a, hi_a, lo_b, hi_b, weight) of the faces with weight > 0.
+
+    A face on the upper side sits one part in 10^9 of a cell inside, so that its particles
+    start in the last cell rather than just outside the grid.
+    """
+    rows = []
+    h_in = 1e-9 * float((upper - lower).max())
+    for axis in range(3):
+        a, b = (axis + 1) % 3, (axis + 2) % 3
+        for side, coord in ((0, lower[axis]), (1, upper[axis] - h_in)):
+            w = weights[axis, side]
+            if w > 0:
+                rows.append((axis, coord, lower[a], upper[a], lower[b], upper[b], w))
+    return np.asarray(rows, dtype=np.float64)
+
+
+def _vec3(value, key: str) -> np.ndarray:
+    arr = np.asarray(list(value), dtype=float)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ConfigError(key, f"must be 3 finite numbers, got {list(value)}")
+    return arr
+
+
+def _positive(spec: Mapping, name: str, key: str, allow_zero=False, allow_inf=False):
+    value = float(spec[name])
+    ok = (value >= 0 if allow_zero else value > 0) and (allow_inf or np.isfinite(value))
+    if not ok:
+        raise ConfigError(
+            f"{key}.{name}", f"must be {'>= 0' if allow_zero else '> 0'}, got {value}"
+        )
+    return value
+
+
+def gust_schedule(spec, key: str) -> GustSchedule:
+    """Check a source's ``gusts`` entry (None: always on)."""
+    if spec is None:
+        return GustSchedule()
+    if not isinstance(spec, Mapping):
+        raise ConfigError(key, f"must be a mapping with keys {sorted(GUST_KEYS)}")
+    unknown = set(spec) - GUST_KEYS
+    if unknown:
+        raise ConfigError(key, f"unknown key(s) {sorted(unknown)}; allowed {sorted(GUST_KEYS)}")
+    if "on" not in spec or "off" not in spec:
+        raise ConfigError(key, "needs both 'on' and 'off' (seconds)")
+    return GustSchedule(
+        on=_positive(spec, "on", key),
+        off=_positive(spec, "off", key, allow_zero=True),
+        start=float(spec.get("start", 0.0)),
+    )
+
+
+def _cross_section(kind: str, velocity, lower, upper) -> tuple[np.ndarray, float]:
+    """Face weights (3, 2) of a faces region and its automatic-rate cross-section (m^2)."""
+    ext = upper - lower
+    areas = np.array([ext[1] * ext[2], ext[0] * ext[2], ext[0] * ext[1]])
+    weights = np.zeros((3, 2))
+    if kind == "uniform":
+        speed = np.linalg.norm(velocity)
+        for axis in range(3):
+            flux = velocity[axis] * areas[axis]  # blows in through min if > 0, max if < 0
+            weights[axis, 0 if flux > 0 else 1] = abs(flux)
+        return weights, float(weights.sum() / speed) if speed > 0 else 0.0
+    weights[:, :] = areas[:, None]  # sink: the whole boundary
+    return weights, float(weights.sum())
+
+
+def emitters_from_scene(scene, grid, wind_cfg, seed: int) -> tuple[Emitter, ...]:
+    """One :class:`Emitter` per scene source (see module docstring for the keys)."""
+    lower, upper = np.asarray(grid.lower, dtype=float), np.asarray(grid.upper, dtype=float)
+    ext = upper - lower
+    largest_face = float(np.sort(ext)[1:].prod())
+    h = grid.h
+    shifts = [
+        np.random.default_rng(s).random(SEQUENCE_DIM)
+        for s in np.random.SeedSequence(seed).spawn(len(scene.sources))
+    ]
+    corners = lower + ext * np.array(
+        [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float
+    )
+    emitters = []
+    for i, (prim, spec) in enumerate(zip(scene.sources, scene.source_specs, strict=True)):
+        key = f"scene.sources[{i}]"
+        emit = spec.get("emit") or {}
+        if not isinstance(emit, Mapping):
+            raise ConfigError(f"{key}.emit", f"must be a mapping with keys {sorted(EMIT_KEYS)}")
+        unknown = set(emit) - EMIT_KEYS
+        if unknown:
+            raise ConfigError(
+                f"{key}.emit", f"unknown key(s) {sorted(unknown)}; allowed {sorted(EMIT_KEYS)}"
+            )
+        if "radius" in emit and prim.kind == "uniform":
+            raise ConfigError(f"{key}.emit.radius", "applies to source, sink and vortex only")
+        gusts = gust_schedule(spec.get("gusts"), f"{key}.gusts")
+        centre = np.asarray(prim.center, dtype=float)
+        axis = np.asarray(prim.axis, dtype=float)
+        axis = axis / np.linalg.norm(axis)
+        if emit.get("box") is not None:
+            box = emit["box"]
+            if not isinstance(box, Mapping) or set(box) != {"min", "max"}:
+                raise ConfigError(f"{key}.emit.box", "must be {min: [x, y, z], max: [x, y, z]}")
+            lo = _vec3(box["min"], f"{key}.emit.box.min")
+            hi = _vec3(box["max"], f"{key}.emit.box.max")
+            if np.any(hi < lo):
+                raise ConfigError(
+                    f"{key}.emit.box.max", f"must be >= min on every axis, got {lo} .. {hi}"
+                )
+            region, geometry = BOX, (lo, hi)
+            flat = np.sort(np.where(hi - lo > 0, hi - lo, 0.0))[1:]
+            section = float(flat.prod()) if flat.prod() > 0 else h * h
+        elif prim.kind in ("uniform", "sink"):
+            weights, section = _cross_section(prim.kind, np.asarray(prim.velocity), lower, upper)
+            if section == 0.0:
+                raise ConfigError(f"{key}.velocity", "a uniform source needs a non-zero velocity")
+            region, geometry = FACES, (_face_rows(lower, upper, weights),)
+        elif prim.kind == "source":
+            r = _positive(emit, "radius", f"{key}.emit") if "radius" in emit else None
+            region, geometry = SPHERE, (centre, r or max(prim.core_radius, 0.5 * h))
+            section = largest_face
+        else:  # vortex: a cylinder around the core line
+            s = (corners - centre) @ axis
+            radial = np.linalg.norm((corners - centre) - s[:, None] * axis, axis=1)
+            r = _positive(emit, "radius", f"{key}.emit") if "radius" in emit else None
+            region, geometry = (
+                CYLINDER,
+                (centre, axis, float(s.min()), float(s.max()), r or float(radial.max())),
+            )
+            section = largest_face
+        if "rate" in emit:
+            rate = _positive(emit, "rate", f"{key}.emit", allow_zero=True)
+        elif wind_cfg.particles_per_second is not None:
+            rate = float(wind_cfg.particles_per_second)
+        else:
+            rate = wind_cfg.particles_per_cell * section / (h * h * wind_cfg.memory)
+        emitters.append(Emitter(i, region, rate, gusts, shifts[i], geometry))
+    return tuple(emitters)
