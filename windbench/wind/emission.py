@@ -37,12 +37,16 @@ per memory window, so that a steady gust keeps every cell it reaches marked. ``A
 flux-weighted inflow cross-section for a uniform source, the whole boundary for a sink and
 the domain's largest face for a point source or vortex (a heuristic: their particles spread).
 
-Positions and emission instants come from the 4-D additive-recurrence (Kronecker)
-sequence of Roberts ("R_d", generalised golden ratio) with a seeded random shift per
-source: a low-discrepancy stratification, so every cell of the emitting surface receives
-particles at regular intervals (plain random emission leaves Poisson gaps), and the same
-seed gives the same particles bit for bit. Candidates that fall outside the grid or inside
-a rigid body are dropped (``rate`` counts candidates).
+Positions are stratified: the emitting region is cut into strata about one cell wide
+(for a uniform source's face exactly its cells; a face's share of strata follows its
+flux), and emission proceeds in rounds in which every stratum emits exactly one particle,
+at a uniformly jittered point, in a seeded random order. A round of the automatic rate
+lasts ``memory / particles_per_cell``, so no cell of the emitting face waits longer than
+two rounds for its next particle (plain random emission leaves Poisson gaps). Emission
+instants within a step are uniform over its emitting time. Everything random comes from
+``numpy.random.default_rng([seed, source, round])``: the same seed gives the same
+particles bit for bit. Candidates that fall outside the grid or inside a rigid body are
+dropped (``rate`` counts candidates).
 """
 
 from __future__ import annotations
@@ -57,18 +61,6 @@ from windbench.errors import ConfigError
 FACES, BOX, SPHERE, CYLINDER = "faces", "box", "sphere", "cylinder"
 EMIT_KEYS = {"rate", "radius", "box"}
 GUST_KEYS = {"on", "off", "start"}
-SEQUENCE_DIM = 4  # three position coordinates + the emission instant within the step
-
-
-def _golden_alpha(dim: int) -> np.ndarray:
-    """Roberts' R_d increments (1/phi_d)^k, phi_d the positive root of x^(d+1) = x + 1."""
-    phi = 2.0
-    for _ in range(64):  # fixed-point iteration phi = (1 + phi)^(1/(d+1)), converges fast
-        phi = (1.0 + phi) ** (1.0 / (dim + 1))
-    return (1.0 / phi) ** np.arange(1, dim + 1)
-
-
-ALPHA = _golden_alpha(SEQUENCE_DIM)
 
 
 @dataclass(frozen=True)
@@ -99,16 +91,17 @@ class GustSchedule:
 
 @dataclass(frozen=True)
 class Emitter:
-    """Model of one source's emission: region, rate (1/s), gusts and sequence shift."""
+    """Model of one source's emission: region, rate (1/s), gusts, strata and seed."""
 
     source: int
     region: str
     rate: float
     gusts: GustSchedule
-    shift: np.ndarray  # (SEQUENCE_DIM,) Cranley-Patterson rotation of the sequence
-    # region geometry: faces -> rows (axis, coord, lo0, hi0, lo1, hi1, weight);
+    seed: int
+    # region geometry: faces -> rows (axis, coord, lo_a, hi_a, lo_b, hi_b, weight);
     # box -> (min, max); sphere -> (centre, radius); cylinder -> (point, axis, s0, s1, R)
     geometry: tuple
+    strata: np.ndarray  # (M, 3, 2): [lo, hi) of each stratum in the unit cube of points()
 
     def points(self, u: np.ndarray) -> np.ndarray:
         """Map sequence points ``u`` ``(n, >= 3)`` in [0, 1) to positions ``(n, 3)``."""
@@ -155,37 +148,86 @@ class Emitter:
             out[sel, b] = row[4] + u[sel, 1] * (row[5] - row[4])
         return out
 
+    def round_samples(self, r: int) -> np.ndarray:
+        """Round r: the M unit-cube points (one per stratum, seeded order) and instants."""
+        rng = np.random.default_rng([self.seed, self.source, r])
+        order = rng.permutation(len(self.strata))
+        jitter = rng.random((len(order), 4))
+        box = self.strata[order]
+        out = np.empty((len(order), 4))
+        out[:, :3] = box[:, :, 0] + jitter[:, :3] * (box[:, :, 1] - box[:, :, 0])
+        out[:, 3] = jitter[:, 3]
+        return out
+
     def emit(self, t0: float, t1: float, carry: float, counter: int):
         """Candidates emitted in [t0, t1): (positions, emission instants, carry, counter).
 
         The number is ``rate * (on-time in the step) + carry`` rounded down; the fraction is
-        carried to the next step, so the long-run count is exact.
+        carried to the next step, so the long-run count is exact. Particle n is round
+        n // M's sample n % M.
         """
         f0, f1 = self.gusts.on_time(t0), self.gusts.on_time(t1)
         expected = self.rate * (f1 - f0) + carry
         n = int(np.floor(expected))
         carry = expected - n
-        idx = counter + np.arange(n, dtype=np.float64)
-        u = np.mod(self.shift + idx[:, None] * ALPHA, 1.0)
+        m = len(self.strata)
+        first, last = counter // m, (counter + n - 1) // m if n else counter // m - 1
+        rounds = [self.round_samples(r) for r in range(first, last + 1)]
+        u = np.concatenate(rounds)[counter - first * m :][:n] if rounds else np.zeros((0, 4))
         instants = self.gusts.instant(f0 + u[:, 3] * (f1 - f0))
         return self.points(u), np.clip(instants, t0, t1), carry, counter + n
 
 
-def _face_rows(lower, upper, weights) -> np.ndarray:
-    """Rows (axis, coord, lo_a, hi_a, lo_b, hi_b, weight) of the faces with weight > 0.
+def _grid_strata(counts, lows=(0.0, 0.0, 0.0), highs=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """Strata (M, 3, 2) of the box [lows, highs) cut into counts[d] equal parts along d."""
+    edges = [np.linspace(lows[d], highs[d], int(counts[d]) + 1) for d in range(3)]
+    idx = np.indices([int(c) for c in counts]).reshape(3, -1).T
+    out = np.empty((len(idx), 3, 2))
+    for d in range(3):
+        out[:, d, 0] = edges[d][idx[:, d]]
+        out[:, d, 1] = edges[d][idx[:, d] + 1]
+    return out
 
-    A face on the upper side sits one part in 10^9 of a cell inside, so that its particles
-    start in the last cell rather than just outside the grid.
+
+def _cells(length: float, h: float) -> int:
+    return max(1, int(round(length / h)))
+
+
+def _faces(lower, upper, weights, h) -> tuple[np.ndarray, np.ndarray]:
+    """Face rows (axis, coord, lo_a, hi_a, lo_b, hi_b, weight) and their strata.
+
+    A face whose flux per area is a fraction c of the strongest face's is cut into
+    strata of about h^2 / c (exactly its cells for the face of an axis-aligned wind);
+    each face's share of the unit interval u0 is its stratum count, so every stratum
+    carries about the same flux and one particle per stratum per round is flux-weighted.
+    A face on the upper side sits one part in 10^9 of the domain inside, so that its
+    particles start in the last cell rather than just outside the grid.
     """
-    rows = []
+    rows, grids = [], []
     h_in = 1e-9 * float((upper - lower).max())
+    ext = upper - lower
+    areas = np.array([ext[(a + 1) % 3] * ext[(a + 2) % 3] for a in range(3)])
+    top = (weights / areas[:, None]).max()  # the strongest flux per area
     for axis in range(3):
         a, b = (axis + 1) % 3, (axis + 2) % 3
+        area = (upper[a] - lower[a]) * (upper[b] - lower[b])
         for side, coord in ((0, lower[axis]), (1, upper[axis] - h_in)):
             w = weights[axis, side]
             if w > 0:
-                rows.append((axis, coord, lower[a], upper[a], lower[b], upper[b], w))
-    return np.asarray(rows, dtype=np.float64)
+                shrink = np.sqrt(w / area / top)  # flux per area relative to the strongest
+                m = (
+                    _cells(shrink * (upper[a] - lower[a]), h),
+                    _cells(shrink * (upper[b] - lower[b]), h),
+                )
+                rows.append([axis, coord, lower[a], upper[a], lower[b], upper[b], m[0] * m[1]])
+                grids.append(m)
+    rows = np.asarray(rows, dtype=np.float64)
+    cum = np.concatenate([[0.0], np.cumsum(rows[:, 6])]) / rows[:, 6].sum()
+    strata = [
+        _grid_strata((m[0], m[1], 1), (cum[f], 0.0, 0.0), (cum[f + 1], 1.0, 1.0))
+        for f, m in enumerate(grids)
+    ]
+    return rows, np.concatenate(strata)
 
 
 def _vec3(value, key: str) -> np.ndarray:
@@ -244,10 +286,6 @@ def emitters_from_scene(scene, grid, wind_cfg, seed: int) -> tuple[Emitter, ...]
     ext = upper - lower
     largest_face = float(np.sort(ext)[1:].prod())
     h = grid.h
-    shifts = [
-        np.random.default_rng(s).random(SEQUENCE_DIM)
-        for s in np.random.SeedSequence(seed).spawn(len(scene.sources))
-    ]
     corners = lower + ext * np.array(
         [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float
     )
@@ -279,25 +317,29 @@ def emitters_from_scene(scene, grid, wind_cfg, seed: int) -> tuple[Emitter, ...]
                     f"{key}.emit.box.max", f"must be >= min on every axis, got {lo} .. {hi}"
                 )
             region, geometry = BOX, (lo, hi)
+            strata = _grid_strata([_cells(v, h) for v in hi - lo])
             flat = np.sort(np.where(hi - lo > 0, hi - lo, 0.0))[1:]
             section = float(flat.prod()) if flat.prod() > 0 else h * h
         elif prim.kind in ("uniform", "sink"):
             weights, section = _cross_section(prim.kind, np.asarray(prim.velocity), lower, upper)
             if section == 0.0:
                 raise ConfigError(f"{key}.velocity", "a uniform source needs a non-zero velocity")
-            region, geometry = FACES, (_face_rows(lower, upper, weights),)
+            rows, strata = _faces(lower, upper, weights, h)
+            region, geometry = FACES, (rows,)
         elif prim.kind == "source":
             r = _positive(emit, "radius", f"{key}.emit") if "radius" in emit else None
-            region, geometry = SPHERE, (centre, r or max(prim.core_radius, 0.5 * h))
+            r = r or max(prim.core_radius, 0.5 * h)
+            region, geometry = SPHERE, (centre, r)
+            m = _cells(np.sqrt(2 * np.pi) * r, h)  # (cos theta, phi) strata ~ h^2 each
+            strata = _grid_strata((m, 2 * m, 1))
             section = largest_face
         else:  # vortex: a cylinder around the core line
             s = (corners - centre) @ axis
             radial = np.linalg.norm((corners - centre) - s[:, None] * axis, axis=1)
             r = _positive(emit, "radius", f"{key}.emit") if "radius" in emit else None
-            region, geometry = (
-                CYLINDER,
-                (centre, axis, float(s.min()), float(s.max()), r or float(radial.max())),
-            )
+            r = r or float(radial.max())
+            region, geometry = CYLINDER, (centre, axis, float(s.min()), float(s.max()), r)
+            strata = _grid_strata((_cells(float(s.max() - s.min()), h), _cells(r, h), 1))
             section = largest_face
         if "rate" in emit:
             rate = _positive(emit, "rate", f"{key}.emit", allow_zero=True)
@@ -305,5 +347,5 @@ def emitters_from_scene(scene, grid, wind_cfg, seed: int) -> tuple[Emitter, ...]
             rate = float(wind_cfg.particles_per_second)
         else:
             rate = wind_cfg.particles_per_cell * section / (h * h * wind_cfg.memory)
-        emitters.append(Emitter(i, region, rate, gusts, shifts[i], geometry))
+        emitters.append(Emitter(i, region, rate, gusts, int(seed), geometry, strata))
     return tuple(emitters)

@@ -91,6 +91,12 @@ class ParticleWind(WindField):
 
     name = "particles"
 
+    @classmethod
+    def check(cls, scene, grid, params) -> None:
+        """Raise ConfigError for bad ``wind.*`` values or source ``emit``/``gusts`` keys."""
+        _check(params)
+        emitters_from_scene(scene, grid, params, int(params.seed))
+
     def __init__(self, scene, grid, params):
         super().__init__(scene, grid, params)
         _check(params)
