@@ -27,7 +27,7 @@ def hit(kind, prm, a, b):
     n = np.zeros(3)
     a, b = np.asarray(a, float), np.asarray(b, float)
     e = b - a
-    s = convex_first_hit(kind, np.asarray(prm, float), *a, *e, n)
+    s = convex_first_hit(kind, np.asarray(prm, float), *a, *e, np.empty((2, 3)), n)
     return s, n
 
 

@@ -82,17 +82,17 @@ def register_bodies(kinds, params, lower, h, shape):
 
 
 @njit(cache=True)
-def convex_first_hit(kind, prm, ax, ay, az, ex, ey, ez, normal):
+def convex_first_hit(kind, prm, ax, ay, az, ex, ey, ez, scratch, normal):
     """First s in [0, 1] with d(a + s e) <= 0 for one convex body, or -1; outward normal.
 
     f(s) = d(a + s e) is convex (d of a convex set), with slope f'(s) = n(s) . e. No root
     when f(1) > 0 and either |e| <= f(0) + f(1) (1-Lipschitz), f'(0) >= 0 or f'(1) <= 0
     (monotone), or the tangent lines at a bracket of the minimum meet above zero; else the
     root is bracketed and bisected. A particle touching the surface (f(0) <= 0) hits at
-    s = 0 only if it moves inward.
+    s = 0 only if it moves inward. ``scratch`` is a (2, 3) work array.
     """
-    n0 = np.empty(3)
-    nm = np.empty(3)
+    n0 = scratch[0]
+    nm = scratch[1]
     length = np.sqrt(ex * ex + ey * ey + ez * ez)
     f0 = body_distance(kind, prm, ax, ay, az, n0)
     g0 = n0[0] * ex + n0[1] * ey + n0[2] * ez
@@ -145,32 +145,16 @@ def convex_first_hit(kind, prm, ax, ay, az, ex, ey, ez, normal):
     return lo
 
 
-@njit(cache=True)
-def _write_cell(reach, touched, n_touched, cell, s, t_now, deflected, ux, uy, uz):
-    """Mark (cell, source s) reached at t_now with value u; deflected beats free in a step."""
+@njit(cache=True, inline="always")
+def _mark(kind, prm, normals, n_hits, lower, h, ny, nz, i, j, k, s, t_now, reach, wc):
+    """Mark cell (i, j, k) for source s at t_now with w_i(centre), the n_hits contact normals
+    removed; a deflected mark beats a free one within a step. Returns the cell id if this is
+    its first mark of the step (for the assembly list), else -1."""
+    cell = (i * ny + j) * nz + k
     row = reach[cell, s]
-    if row[0] != t_now:
-        if n_touched == touched.shape[0]:
-            grown = np.empty(2 * touched.shape[0] + 16, dtype=np.int64)
-            grown[:n_touched] = touched[:n_touched]
-            touched = grown
-        touched[n_touched] = cell
-        n_touched += 1
-    elif row[1] > 0.0 and not deflected:
-        return touched, n_touched
-    row[0] = t_now
-    row[1] = 1.0 if deflected else 0.0
-    row[2] = ux
-    row[3] = uy
-    row[4] = uz
-    return touched, n_touched
-
-
-@njit(cache=True)
-def _mark(
-    kind, prm, normals, n_hits, lower, h, ny, nz, i, j, k, s, t_now, reach, touched, n_touched, wc
-):
-    """Mark cell (i, j, k) for source s: w_i(centre) with the n_hits contact normals removed."""
+    first = row[0] != t_now
+    if not first and row[1] > 0.0 and n_hits == 0:
+        return -1
     primitive_velocity(
         kind, prm, lower[0] + (i + 0.5) * h, lower[1] + (j + 0.5) * h, lower[2] + (k + 0.5) * h, wc
     )
@@ -180,8 +164,23 @@ def _mark(
         wc[0] -= dn * normals[m, 0]
         wc[1] -= dn * normals[m, 1]
         wc[2] -= dn * normals[m, 2]
-    cell = (i * ny + j) * nz + k
-    return _write_cell(reach, touched, n_touched, cell, s, t_now, n_hits > 0, wc[0], wc[1], wc[2])
+    row[0] = t_now
+    row[1] = 1.0 if n_hits > 0 else 0.0
+    row[2] = wc[0]
+    row[3] = wc[1]
+    row[4] = wc[2]
+    return cell if first else -1
+
+
+@njit(cache=True, inline="always")
+def _push(touched, n_touched, cell):
+    """Append cell to the touched list (doubling it when full)."""
+    if n_touched == touched.shape[0]:
+        grown = np.empty(2 * touched.shape[0] + 16, dtype=np.int64)
+        grown[:n_touched] = touched[:n_touched]
+        touched = grown
+    touched[n_touched] = cell
+    return touched
 
 
 @njit(cache=True)
@@ -222,13 +221,16 @@ def trace_gusts(
     wc = np.empty(3)
     hit_n = np.empty(3)
     tmp_n = np.empty(3)
+    scratch = np.empty((2, 3))
     normals = np.empty((max_hits, 3))
     a = np.empty(3)
     b = np.empty(3)
     for q in range(positions.shape[0]):
         s = sources[q]
+        kind = kinds[s]
+        prm = prims[s]
         px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
-        primitive_velocity(kinds[s], prims[s], px, py, pz, w)  # Euler: w_i(p_t)
+        primitive_velocity(kind, prm, px, py, pz, w)  # Euler: w_i(p_t)
         w2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
         vx, vy, vz = w[0], w[1], w[2]
         remaining = durations[q]
@@ -276,6 +278,7 @@ def trace_gusts(
                         b[0] - a[0],
                         b[1] - a[1],
                         b[2] - a[2],
+                        scratch,
                         tmp_n,
                     )
                     if 0.0 <= sh < best:
@@ -304,25 +307,12 @@ def trace_gusts(
                     normals[n_hits, 1] = hit_n[1]
                     normals[n_hits, 2] = hit_n[2]
                     n_hits += 1
-                touched, n_touched = _mark(
-                    kinds[s],
-                    prims[s],
-                    normals,
-                    n_hits,
-                    lower,
-                    h,
-                    ny,
-                    nz,
-                    i,
-                    j,
-                    k,
-                    s,
-                    t_now,
-                    reach,
-                    touched,
-                    n_touched,
-                    wc,
+                first = _mark(
+                    kind, prm, normals, n_hits, lower, h, ny, nz, i, j, k, s, t_now, reach, wc
                 )
+                if first >= 0:
+                    touched = _push(touched, n_touched, first)
+                    n_touched += 1
                 crossings += 1
                 if best <= 1.0:
                     # stop on the surface, lose the normal component: w - (n . w) n
@@ -341,9 +331,9 @@ def trace_gusts(
                         and 0 <= rj < ny
                         and 0 <= rk < nz
                     ):
-                        touched, n_touched = _mark(
-                            kinds[s],
-                            prims[s],
+                        first = _mark(
+                            kind,
+                            prm,
                             normals,
                             n_hits,
                             lower,
@@ -356,10 +346,11 @@ def trace_gusts(
                             s,
                             t_now,
                             reach,
-                            touched,
-                            n_touched,
                             wc,
                         )
+                        if first >= 0:
+                            touched = _push(touched, n_touched, first)
+                            n_touched += 1
                         crossings += 1
                     dn = vx * hit_n[0] + vy * hit_n[1] + vz * hit_n[2]
                     vx -= dn * hit_n[0]
