@@ -79,6 +79,7 @@ class ParticleWindConfig(WindConfig):
     max_age: float = 10.0  # s; older particles die
     memory: float = 0.1  # s; a cell keeps a source's wind this long after its last particle
     max_hits: int = 8  # collisions per particle per step before it waits for the next step
+    deflected_cells: str = "bodies"  # which hits make later marks w - (n.w) n: all|bodies|none
     seed: int = 0  # conf/wind/particles.yaml sets ${seed}
 
 

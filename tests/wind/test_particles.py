@@ -318,7 +318,14 @@ def test_bad_emission_settings_name_the_key(source_extra, key):
 
 
 @pytest.mark.parametrize(
-    "override", ["wind.memory=0", "wind.max_particles=0", "wind.max_age=-1", "wind.max_hits=0"]
+    "override",
+    [
+        "wind.memory=0",
+        "wind.max_particles=0",
+        "wind.max_age=-1",
+        "wind.max_hits=0",
+        "wind.deflected_cells=some",
+    ],
 )
 def test_bad_wind_settings_name_the_key(override):
     scene = scene_of([{"type": "uniform", "velocity": [1.0, 0, 0]}])

@@ -177,13 +177,15 @@ def test_euler_step_and_every_crossed_cell_marked(particle_params):
         checked += 1
 
 
-def test_slide_along_a_plane_after_the_hit(particle_params):
+@pytest.mark.parametrize(("mode", "deflected"), [("bodies", True), ("all", True), ("none", False)])
+def test_slide_along_a_plane_after_the_hit(mode, deflected):
     """Wind (1, 0, -1) onto the floor z = 0.3: hit at t = 0.4 s, then slide at (1, 0, 0) for 0.5 s."""
     scene = _scene(
         [{"type": "uniform", "velocity": [1.0, 0.0, -1.0]}],
         [{"type": "plane", "point": [0.0, 0.0, 0.3], "normal": [0.0, 0.0, 1.0]}],
     )
-    wind, grid = _wind(scene, 16, particle_params)
+    params = compose_config(["wind=particles", f"wind.deflected_cells={mode}"]).wind
+    wind, grid = _wind(scene, 16, params)
     wind.add_particles([[0.5, 0.5, 0.7]], [0])
     wind.step(0.9, Obstacles.rigid_only(scene.bodies))
     pos = wind.particles[0][0]
@@ -191,7 +193,8 @@ def test_slide_along_a_plane_after_the_hit(particle_params):
     assert pos[2] > 0.3  # rests outside the surface
     u = wind.velocity()
     rest = grid.cell_index(pos)[0]
-    np.testing.assert_allclose(u[tuple(rest)], [1.0, 0.0, 0.0], atol=1e-12)  # u . n = 0
+    # u . n = 0 where the particle slid, unless marks stay free
+    np.testing.assert_allclose(u[tuple(rest)], [1.0, 0.0, 0.0 if deflected else -1.0], atol=1e-12)
     start = grid.cell_index([[0.5, 0.5, 0.7]])[0]
     np.testing.assert_allclose(u[tuple(start)], [1.0, 0.0, -1.0])  # free before the hit
 
@@ -212,15 +215,20 @@ def test_head_on_hit_ends_the_particle_and_leaves_zero(particle_params):
     assert not wind.ever_reached()[grid.cell_index([[2.1, 0.4, 0.4]])[0][0] :].any()
 
 
-def test_cloth_triangle_deflects_and_shadows(particle_params):
+@pytest.mark.parametrize(("mode", "deflected"), [("bodies", False), ("all", True)])
+def test_cloth_triangle_deflects_and_shadows(mode, deflected):
     """A tilted triangle: the particle slides in its plane and never reaches behind it."""
     scene = _scene([{"type": "uniform", "velocity": [1.0, 0.0, 0.0]}])
-    wind, grid = _wind(scene, 16, particle_params)
+    params = compose_config(["wind=particles", f"wind.deflected_cells={mode}"]).wind
+    wind, grid = _wind(scene, 16, params)
     # plane x + z = 2.5 (normal (1, 0, 1)/sqrt 2), a big triangle across the particle's path
     tri = np.array([[2.5, -1.0, 0.0], [2.5, 3.0, 0.0], [1.5, 1.0, 1.0]])
     obstacles = Obstacles((), tri, np.zeros_like(tri), np.array([[0, 1, 2]]))
     wind.add_particles([[1.0, 0.5, 0.3]], [0])
     wind.step(1.5, obstacles)
     # hit at x = 2.2 after 1.2 s; then 0.3 s along (1, 0, -1)/2 -> (2.35, 0.5, 0.15)
-    np.testing.assert_allclose(wind.particles[0][0], [2.35, 0.5, 0.15], atol=1e-5)
-    assert wind.particles[0][0] @ [1, 0, 1] < 2.5
+    pos = wind.particles[0][0]
+    np.testing.assert_allclose(pos, [2.35, 0.5, 0.15], atol=1e-5)
+    assert pos @ [1, 0, 1] < 2.5
+    u = wind.velocity()[tuple(grid.cell_index(pos)[0])]
+    np.testing.assert_allclose(u, [0.5, 0.0, -0.5] if deflected else [1.0, 0.0, 0.0])

@@ -20,14 +20,15 @@ convex function along a piece; :func:`convex_first_hit` finds the first root of 
 obstacles like any other; their lee is thinner than a cell and mostly invisible on the grid).
 
 Cell state per (cell, source) is one row ``[t, deflected, ux, uy, uz]``: when the source's
-particles last reached the cell, whether that particle had been deflected, and the value
-it left. Choice (documented in :mod:`windbench.wind.particles`): a free particle leaves
-w_i at the cell centre, so with no obstacles the field equals the ``global`` backend's
-exactly; a deflected particle leaves the same w_i(centre) with its contact normals
-projected out, so u . n = 0 next to the object (paper: u(p_col) . n_obj = 0). Within one
-step a deflected write beats a free one (the no-penetration condition wins at the
-surface); otherwise the later write wins. All kernels run serially over the particles in
-their stored order, so a run is bit-for-bit reproducible.
+particles last reached the cell, whether that mark was a deflected one, and the value it
+left. Choice (documented in :mod:`windbench.wind.particles`): a free particle leaves w_i
+at the cell centre, so with no obstacles the field equals the ``global`` backend's
+exactly. After a hit, ``mark_mode`` says which contact normals the particle's later marks
+in this step remove from w_i(centre) (the paper's u(p_col) . n_obj = 0): those of every
+hit (``all``), of rigid bodies only (``bodies``) or none. Within one step a deflected mark
+beats a free one (the no-penetration condition wins at the surface); otherwise the later
+mark wins. The kernels run serially over the particles in their stored order, so a run
+is bit-for-bit reproducible.
 """
 
 from __future__ import annotations
@@ -40,6 +41,8 @@ from windbench.geometry.raster import segment_triangle
 from windbench.wind.primitives import primitive_velocity
 
 ROW = 5  # t, deflected, ux, uy, uz
+MARK_NONE, MARK_BODIES, MARK_ALL = 0, 1, 2  # which hits make the marks "deflected"
+MARK_MODES = {"none": MARK_NONE, "bodies": MARK_BODIES, "all": MARK_ALL}
 ROOT_ITERATIONS = 60
 
 
@@ -146,26 +149,26 @@ def convex_first_hit(kind, prm, ax, ay, az, ex, ey, ez, scratch, normal):
 
 
 @njit(cache=True, inline="always")
-def _mark(kind, prm, normals, n_hits, lower, h, ny, nz, i, j, k, s, t_now, reach, wc):
-    """Mark cell (i, j, k) for source s at t_now with w_i(centre), the n_hits contact normals
-    removed; a deflected mark beats a free one within a step. Returns the cell id if this is
-    its first mark of the step (for the assembly list), else -1."""
+def _mark(kind, prm, normals, n_normals, lower, h, ny, nz, i, j, k, s, t_now, reach, wc):
+    """Mark cell (i, j, k) for source s at t_now with w_i(centre), the first n_normals
+    contact normals removed; a deflected mark (n_normals > 0) beats a free one within a
+    step. Returns the cell id if this is its first mark of the step, else -1."""
     cell = (i * ny + j) * nz + k
     row = reach[cell, s]
     first = row[0] != t_now
-    if not first and row[1] > 0.0 and n_hits == 0:
+    if not first and row[1] > 0.0 and n_normals == 0:
         return -1
     primitive_velocity(
         kind, prm, lower[0] + (i + 0.5) * h, lower[1] + (j + 0.5) * h, lower[2] + (k + 0.5) * h, wc
     )
-    for m in range(n_hits):
+    for m in range(n_normals):
         # w <- w - (n . w) n for each surface hit so far in this step
         dn = wc[0] * normals[m, 0] + wc[1] * normals[m, 1] + wc[2] * normals[m, 2]
         wc[0] -= dn * normals[m, 0]
         wc[1] -= dn * normals[m, 1]
         wc[2] -= dn * normals[m, 2]
     row[0] = t_now
-    row[1] = 1.0 if n_hits > 0 else 0.0
+    row[1] = 1.0 if n_normals > 0 else 0.0
     row[2] = wc[0]
     row[3] = wc[1]
     row[4] = wc[2]
@@ -204,6 +207,7 @@ def trace_gusts(
     t_now,
     delta,
     max_hits,
+    mark_mode,
     reach,
     touched,
     positions_out,
@@ -235,6 +239,7 @@ def trace_gusts(
         vx, vy, vz = w[0], w[1], w[2]
         remaining = durations[q]
         n_hits = 0
+        n_marks = 0  # hits whose normal the cell marks remove (see mark_mode)
         alive = True
         moving = True
         while moving:
@@ -267,6 +272,7 @@ def trace_gusts(
                 a[0], a[1], a[2] = px + t * ex, py + t * ey, pz + t * ez
                 b[0], b[1], b[2] = px + t_exit * ex, py + t_exit * ey, pz + t_exit * ez
                 best = 2.0
+                body_hit = False
                 for m in range(body_start[cell], body_start[cell + 1]):
                     bi = body_items[m]
                     sh = convex_first_hit(
@@ -283,6 +289,7 @@ def trace_gusts(
                     )
                     if 0.0 <= sh < best:
                         best = sh
+                        body_hit = True
                         hit_n[0], hit_n[1], hit_n[2] = tmp_n[0], tmp_n[1], tmp_n[2]
                 for m in range(tri_start[cell], tri_start[cell + 1]):
                     tri = tri_items[m]
@@ -292,6 +299,7 @@ def trace_gusts(
                     sh = segment_triangle(a, b, va, vb, vc)
                     if 0.0 <= sh < best:
                         best = sh
+                        body_hit = False
                         # triangle normal, turned to face the particle
                         e1 = vb - va
                         e2 = vc - va
@@ -303,12 +311,14 @@ def trace_gusts(
                             nn = -nn
                         hit_n[0], hit_n[1], hit_n[2] = nx_ / nn, ny_ / nn, nz_ / nn
                 if best <= 1.0:
-                    normals[n_hits, 0] = hit_n[0]
-                    normals[n_hits, 1] = hit_n[1]
-                    normals[n_hits, 2] = hit_n[2]
                     n_hits += 1
+                    if mark_mode == MARK_ALL or (mark_mode == MARK_BODIES and body_hit):
+                        normals[n_marks, 0] = hit_n[0]
+                        normals[n_marks, 1] = hit_n[1]
+                        normals[n_marks, 2] = hit_n[2]
+                        n_marks += 1
                 first = _mark(
-                    kind, prm, normals, n_hits, lower, h, ny, nz, i, j, k, s, t_now, reach, wc
+                    kind, prm, normals, n_marks, lower, h, ny, nz, i, j, k, s, t_now, reach, wc
                 )
                 if first >= 0:
                     touched = _push(touched, n_touched, first)
@@ -335,7 +345,7 @@ def trace_gusts(
                             kind,
                             prm,
                             normals,
-                            n_hits,
+                            n_marks,
                             lower,
                             h,
                             ny,
