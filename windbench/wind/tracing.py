@@ -149,18 +149,33 @@ def convex_first_hit(kind, prm, ax, ay, az, ex, ey, ez, scratch, normal):
 
 
 @njit(cache=True, inline="always")
-def _mark(kind, prm, normals, n_normals, lower, h, ny, nz, i, j, k, s, t_now, reach, wc):
-    """Mark cell (i, j, k) for source s at t_now with w_i(centre), the first n_normals
+def _push(touched, n_touched, cell):
+    """Append cell to the touched list (doubling it when full)."""
+    if n_touched == touched.shape[0]:
+        grown = np.empty(2 * touched.shape[0] + 16, dtype=np.int64)
+        grown[:n_touched] = touched[:n_touched]
+        touched = grown
+    touched[n_touched] = cell
+    return touched
+
+
+@njit(cache=True, inline="always")
+def _mark(
+    kind, prm, normals, n_normals, lower, h, shape, idx, s, t_now, reach, wc, touched, n_touched
+):
+    """Mark cell idx = (i, j, k) for source s at t_now with w_i(centre), the first n_normals
     contact normals removed; a deflected mark (n_normals > 0) beats a free one within a
-    step. Returns the cell id if this is its first mark of the step, else -1."""
-    cell = (i * ny + j) * nz + k
+    step. A cell's first mark of the step goes on the ``touched`` list (for the assembly);
+    returns (touched, n_touched)."""
+    cell = (idx[0] * shape[1] + idx[1]) * shape[2] + idx[2]
     row = reach[cell, s]
     first = row[0] != t_now
     if not first and row[1] > 0.0 and n_normals == 0:
-        return -1
-    primitive_velocity(
-        kind, prm, lower[0] + (i + 0.5) * h, lower[1] + (j + 0.5) * h, lower[2] + (k + 0.5) * h, wc
-    )
+        return touched, n_touched
+    cx = lower[0] + (idx[0] + 0.5) * h
+    cy = lower[1] + (idx[1] + 0.5) * h
+    cz = lower[2] + (idx[2] + 0.5) * h
+    primitive_velocity(kind, prm, cx, cy, cz, wc)
     for m in range(n_normals):
         # w <- w - (n . w) n for each surface hit so far in this step
         dn = wc[0] * normals[m, 0] + wc[1] * normals[m, 1] + wc[2] * normals[m, 2]
@@ -172,18 +187,10 @@ def _mark(kind, prm, normals, n_normals, lower, h, ny, nz, i, j, k, s, t_now, re
     row[2] = wc[0]
     row[3] = wc[1]
     row[4] = wc[2]
-    return cell if first else -1
-
-
-@njit(cache=True, inline="always")
-def _push(touched, n_touched, cell):
-    """Append cell to the touched list (doubling it when full)."""
-    if n_touched == touched.shape[0]:
-        grown = np.empty(2 * touched.shape[0] + 16, dtype=np.int64)
-        grown[:n_touched] = touched[:n_touched]
-        touched = grown
-    touched[n_touched] = cell
-    return touched
+    if first:
+        touched = _push(touched, n_touched, cell)
+        n_touched += 1
+    return touched, n_touched
 
 
 @njit(cache=True)
@@ -218,7 +225,7 @@ def trace_gusts(
     ``reach`` (n_cells, n_sources, ROW) is updated in place; ``touched`` collects the cells
     first marked this step (grown when full). Returns (touched, n_touched, crossings).
     """
-    nx, ny, nz = shape[0], shape[1], shape[2]
+    ny, nz = shape[1], shape[2]
     n_touched = 0
     crossings = 0
     w = np.empty(3)
@@ -229,48 +236,55 @@ def trace_gusts(
     normals = np.empty((max_hits, 3))
     a = np.empty(3)
     b = np.empty(3)
+    p = np.empty(3)  # particle position
+    v = np.empty(3)  # its velocity (w_i, deflected after hits)
+    e = np.empty(3)  # this path: p -> p + e
+    cur = np.empty(3, dtype=np.int64)  # current cell
+    step = np.empty(3, dtype=np.int64)  # +-1 per axis
+    t_next = np.empty(3)  # path parameter of the next cell face per axis
+    t_cell = np.empty(3)  # path parameter per cell width per axis
     for q in range(positions.shape[0]):
         s = sources[q]
         kind = kinds[s]
         prm = prims[s]
-        px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
-        primitive_velocity(kind, prm, px, py, pz, w)  # Euler: w_i(p_t)
+        for ax in range(3):
+            p[ax] = positions[q, ax]
+        primitive_velocity(kind, prm, p[0], p[1], p[2], w)  # Euler: w_i(p_t)
         w2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
-        vx, vy, vz = w[0], w[1], w[2]
+        v[:] = w
         remaining = durations[q]
         n_hits = 0
         n_marks = 0  # hits whose normal the cell marks remove (see mark_mode)
         alive = True
+        stagnant = False
         moving = True
         while moving:
-            # one straight path p -> p + v * remaining, walked cell by cell
-            ex, ey, ez = vx * remaining, vy * remaining, vz * remaining
-            fi = (px - lower[0]) / h
-            fj = (py - lower[1]) / h
-            fk = (pz - lower[2]) / h
-            if not (0.0 <= fi < nx and 0.0 <= fj < ny and 0.0 <= fk < nz):
-                alive = False
-                break
-            i, j, k = int(fi), int(fj), int(fk)
-            step_i = 1 if ex > 0 else -1
-            step_j = 1 if ey > 0 else -1
-            step_k = 1 if ez > 0 else -1
-            t_i = ((i + (ex > 0)) * h + lower[0] - px) / ex if ex != 0.0 else np.inf
-            t_j = ((j + (ey > 0)) * h + lower[1] - py) / ey if ey != 0.0 else np.inf
-            t_k = ((k + (ez > 0)) * h + lower[2] - pz) / ez if ez != 0.0 else np.inf
-            d_i = h / abs(ex) if ex != 0.0 else np.inf
-            d_j = h / abs(ey) if ey != 0.0 else np.inf
-            d_k = h / abs(ez) if ez != 0.0 else np.inf
-            t = 0.0
+            # one straight path p -> p + v * remaining, walked cell by cell (Amanatides-Woo)
             moving = False
+            for ax in range(3):
+                e[ax] = v[ax] * remaining
+                f = (p[ax] - lower[ax]) / h
+                if not 0.0 <= f < shape[ax]:
+                    alive = False
+                cur[ax] = int(f)
+                step[ax] = 1 if e[ax] > 0 else -1
+                if e[ax] != 0.0:
+                    face = (cur[ax] + (1 if e[ax] > 0 else 0)) * h + lower[ax]
+                    t_next[ax] = (face - p[ax]) / e[ax]
+                    t_cell[ax] = h / abs(e[ax])
+                else:
+                    t_next[ax] = np.inf
+                    t_cell[ax] = np.inf
+            if not alive:
+                break
+            t = 0.0
             while True:
-                t_exit = min(t_i, t_j, t_k, 1.0)
-                if t_exit < t:
-                    t_exit = t
-                cell = (i * ny + j) * nz + k
+                t_exit = max(t, min(t_next[0], t_next[1], t_next[2], 1.0))
+                cell = (cur[0] * ny + cur[1]) * nz + cur[2]
                 # the piece a -> b lies in this cell: test what is registered here
-                a[0], a[1], a[2] = px + t * ex, py + t * ey, pz + t * ez
-                b[0], b[1], b[2] = px + t_exit * ex, py + t_exit * ey, pz + t_exit * ez
+                for ax in range(3):
+                    a[ax] = p[ax] + t * e[ax]
+                    b[ax] = p[ax] + t_exit * e[ax]
                 best = 2.0
                 body_hit = False
                 for m in range(body_start[cell], body_start[cell + 1]):
@@ -290,7 +304,7 @@ def trace_gusts(
                     if 0.0 <= sh < best:
                         best = sh
                         body_hit = True
-                        hit_n[0], hit_n[1], hit_n[2] = tmp_n[0], tmp_n[1], tmp_n[2]
+                        hit_n[:] = tmp_n
                 for m in range(tri_start[cell], tri_start[cell + 1]):
                     tri = tri_items[m]
                     va = cloth_positions[cloth_triangles[tri, 0]]
@@ -300,103 +314,71 @@ def trace_gusts(
                     if 0.0 <= sh < best:
                         best = sh
                         body_hit = False
-                        # triangle normal, turned to face the particle
-                        e1 = vb - va
-                        e2 = vc - va
-                        nx_ = e1[1] * e2[2] - e1[2] * e2[1]
-                        ny_ = e1[2] * e2[0] - e1[0] * e2[2]
-                        nz_ = e1[0] * e2[1] - e1[1] * e2[0]
-                        nn = np.sqrt(nx_ * nx_ + ny_ * ny_ + nz_ * nz_)
-                        if nx_ * ex + ny_ * ey + nz_ * ez > 0.0:
-                            nn = -nn
-                        hit_n[0], hit_n[1], hit_n[2] = nx_ / nn, ny_ / nn, nz_ / nn
+                        # the triangle's unit normal, turned to face the particle
+                        tri_n = np.cross(vb - va, vc - va)
+                        tri_n /= np.sqrt((tri_n * tri_n).sum())
+                        if tri_n[0] * e[0] + tri_n[1] * e[1] + tri_n[2] * e[2] > 0.0:
+                            tri_n = -tri_n
+                        hit_n[:] = tri_n
                 if best <= 1.0:
                     n_hits += 1
                     if mark_mode == MARK_ALL or (mark_mode == MARK_BODIES and body_hit):
-                        normals[n_marks, 0] = hit_n[0]
-                        normals[n_marks, 1] = hit_n[1]
-                        normals[n_marks, 2] = hit_n[2]
+                        normals[n_marks] = hit_n
                         n_marks += 1
-                first = _mark(
-                    kind, prm, normals, n_marks, lower, h, ny, nz, i, j, k, s, t_now, reach, wc
+                touched, n_touched = _mark(
+                    kind,
+                    prm,
+                    normals,
+                    n_marks,
+                    lower,
+                    h,
+                    shape,
+                    cur,
+                    s,
+                    t_now,
+                    reach,
+                    wc,
+                    touched,
+                    n_touched,
                 )
-                if first >= 0:
-                    touched = _push(touched, n_touched, first)
-                    n_touched += 1
                 crossings += 1
                 if best <= 1.0:
                     # stop on the surface, lose the normal component: w - (n . w) n
                     th = t + best * (t_exit - t)
-                    px = px + th * ex + delta * hit_n[0]
-                    py = py + th * ey + delta * hit_n[1]
-                    pz = pz + th * ez + delta * hit_n[2]
+                    for ax in range(3):
+                        p[ax] += th * e[ax] + delta * hit_n[ax]
                     remaining *= 1.0 - th
-                    # the cell it rests in (across a face the hit lay on) carries the mark too
-                    ri = int(np.floor((px - lower[0]) / h))
-                    rj = int(np.floor((py - lower[1]) / h))
-                    rk = int(np.floor((pz - lower[2]) / h))
-                    if (
-                        (ri != i or rj != j or rk != k)
-                        and 0 <= ri < nx
-                        and 0 <= rj < ny
-                        and 0 <= rk < nz
-                    ):
-                        first = _mark(
-                            kind,
-                            prm,
-                            normals,
-                            n_marks,
-                            lower,
-                            h,
-                            ny,
-                            nz,
-                            ri,
-                            rj,
-                            rk,
-                            s,
-                            t_now,
-                            reach,
-                            wc,
-                        )
-                        if first >= 0:
-                            touched = _push(touched, n_touched, first)
-                            n_touched += 1
-                        crossings += 1
-                    dn = vx * hit_n[0] + vy * hit_n[1] + vz * hit_n[2]
-                    vx -= dn * hit_n[0]
-                    vy -= dn * hit_n[1]
-                    vz -= dn * hit_n[2]
-                    if vx * vx + vy * vy + vz * vz <= 1e-24 * w2:
-                        alive = False  # head-on: the gust stagnates at the wall
-                    elif n_hits < max_hits and remaining > 0.0:
-                        moving = True  # slide on along the surface
+                    dn = v[0] * hit_n[0] + v[1] * hit_n[1] + v[2] * hit_n[2]
+                    for ax in range(3):
+                        v[ax] -= dn * hit_n[ax]
+                    if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= 1e-24 * w2:
+                        stagnant = True  # head-on: the gust stagnates at the wall
+                        remaining = 0.0
+                    elif n_hits >= max_hits:
+                        remaining = 0.0
+                    # slide on along the surface; a path of length 0 still marks the cell
+                    # the particle rests in (across the face the hit may have lain on)
+                    moving = True
                     break
                 if t_exit >= 1.0:
-                    px, py, pz = px + ex, py + ey, pz + ez
+                    for ax in range(3):
+                        p[ax] += e[ax]
                     break
-                if t_i <= t_j and t_i <= t_k:
-                    i += step_i
-                    t = t_i
-                    t_i += d_i
-                    if i < 0 or i >= nx:
-                        alive = False
-                        break
-                elif t_j <= t_k:
-                    j += step_j
-                    t = t_j
-                    t_j += d_j
-                    if j < 0 or j >= ny:
-                        alive = False
-                        break
-                else:
-                    k += step_k
-                    t = t_k
-                    t_k += d_k
-                    if k < 0 or k >= nz:
-                        alive = False
-                        break
-        positions_out[q, 0], positions_out[q, 1], positions_out[q, 2] = px, py, pz
-        alive_out[q] = alive
+                # into the next cell across the nearest face
+                ax = 0
+                if t_next[1] < t_next[ax]:
+                    ax = 1
+                if t_next[2] < t_next[ax]:
+                    ax = 2
+                cur[ax] += step[ax]
+                t = t_next[ax]
+                t_next[ax] += t_cell[ax]
+                if not 0 <= cur[ax] < shape[ax]:
+                    alive = False
+                    break
+        for ax in range(3):
+            positions_out[q, ax] = p[ax]
+        alive_out[q] = alive and not stagnant
     return touched, n_touched, crossings
 
 
