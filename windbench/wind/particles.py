@@ -36,6 +36,14 @@ Choices the paper leaves open (written down here):
 - *Head-on hits.* A particle whose velocity has no tangential part left after a hit
   (w parallel to n) is removed: its gust has stagnated at the wall. It still marks the
   cell where it stopped (with zero).
+- *Sinks* emit on the whole domain boundary; their particles gather at the centre (where
+  w_i vanishes inside the core) until ``max_age``.
+- *Order and cost.* Tracing runs serially over the particles in their stored order (so
+  the "later mark wins" rule is deterministic); every ``SORT_EVERY`` steps the particles
+  are reordered by cell (stable sort) so that the walk through the cell arrays is
+  sequential in memory. Cost per step: O(particles x cells crossed) for emission, tracing,
+  collision tests (only what is registered in each crossed cell) and the field update
+  (only the cells marked this step and those whose marks just expired are recomputed).
 - *Domain faces.* Particles leave through every face and die (the field outside the grid
   is not kept); boundary kinds (slip, periodic, ...) do not steer them.
 - *Thin poles* (``resolve: false``) are obstacles like other bodies.
@@ -160,6 +168,7 @@ class ParticleWind(WindField):
             src.append(np.full(len(p), e.source, dtype=np.int64))
             dur.append(t1 - instants)
         if not pos:
+            self._stats["dropped_particles"] = 0.0
             return np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0)
         pos, src, dur = np.concatenate(pos), np.concatenate(src), np.concatenate(dur)
         keep = self.grid.contains(pos, tol=0.0) & np.all(
@@ -269,7 +278,10 @@ class ParticleWind(WindField):
 
     # ---------------------------------------------------------------- queries
     def velocity(self) -> np.ndarray:
-        return self._u.reshape(*self.grid.shape, 3)
+        """u on the cells (read-only view of the backend's state)."""
+        u = self._u.reshape(*self.grid.shape, 3)
+        u.flags.writeable = False
+        return u
 
     def stats(self) -> dict[str, float]:
         return dict(self._stats)
@@ -278,7 +290,7 @@ class ParticleWind(WindField):
         """``(n_sources, nx, ny, nz)`` bool: cells each source reached within ``memory``."""
         out = np.zeros(self._reach.shape[:2], dtype=np.bool_)
         reached_sources(self._reach, self.time, self._memory, out)
-        return out.T.reshape(self._reach.shape[1], *self.grid.shape)
+        return out.T.reshape(self._reach.shape[1], *self.grid.shape)[: len(self.scene.sources)]
 
     def ever_reached(self) -> np.ndarray:
         """``(nx, ny, nz)`` bool: cells any particle has marked since the start."""
