@@ -168,9 +168,10 @@ def _mark(
     step. A cell's first mark of the step goes on the ``touched`` list (for the assembly);
     returns (touched, n_touched)."""
     cell = (idx[0] * shape[1] + idx[1]) * shape[2] + idx[2]
-    row = reach[cell, s]
-    first = row[0] != t_now
-    if not first and row[1] > 0.0 and n_normals == 0:
+    first = reach[cell, s, 0] != t_now
+    if not first and n_normals == 0:
+        # marked already this step: a free mark would repeat the same w_i(centre), and a
+        # deflected one beats it
         return touched, n_touched
     cx = lower[0] + (idx[0] + 0.5) * h
     cy = lower[1] + (idx[1] + 0.5) * h
@@ -182,11 +183,11 @@ def _mark(
         wc[0] -= dn * normals[m, 0]
         wc[1] -= dn * normals[m, 1]
         wc[2] -= dn * normals[m, 2]
-    row[0] = t_now
-    row[1] = 1.0 if n_normals > 0 else 0.0
-    row[2] = wc[0]
-    row[3] = wc[1]
-    row[4] = wc[2]
+    reach[cell, s, 0] = t_now
+    reach[cell, s, 1] = 1.0 if n_normals > 0 else 0.0
+    reach[cell, s, 2] = wc[0]
+    reach[cell, s, 3] = wc[1]
+    reach[cell, s, 4] = wc[2]
     if first:
         touched = _push(touched, n_touched, cell)
         n_touched += 1
