@@ -104,7 +104,7 @@ class Emitter:
     strata: np.ndarray  # (M, 3, 2): [lo, hi) of each stratum in the unit cube of points()
 
     def points(self, u: np.ndarray) -> np.ndarray:
-        """Map sequence points ``u`` ``(n, >= 3)`` in [0, 1) to positions ``(n, 3)``."""
+        """Map unit-cube points ``u`` ``(n, >= 3)`` in [0, 1) to positions ``(n, 3)``."""
         n = u.shape[0]
         out = np.empty((n, 3))
         if self.region == BOX:
