@@ -82,7 +82,9 @@ def prepare(cfg: DictConfig) -> RunSetup:
             f"scene.probes.{probe}",
             "is required when a scene has probes (lee and free_stream go together)",
         )
-    cfl = _check_cfl(scene, grid, dt, backend_class(cfg.wind.name))
+    backend = backend_class(cfg.wind.name)
+    backend.check(scene, grid, cfg.wind)
+    cfl = _check_cfl(scene, grid, dt, backend)
     n_steps = int(round(duration / dt))
     snaps = np.unique(np.round(np.linspace(0, n_steps, cfg.output.snapshots + 1)[1:]).astype(int))
     model = ClothModel.from_meshes(scene.cloths)

@@ -48,6 +48,10 @@ class WindField(ABC):
     name: ClassVar[str] = ""
     max_cfl: ClassVar[float] = float("inf")  # above it the run warns (see simulate.prepare)
 
+    @classmethod
+    def check(cls, scene, grid: Grid, params: Any) -> None:
+        """Raise ConfigError for bad ``wind.*`` values before any work (default: none)."""
+
     def __init__(self, scene, grid: Grid, params: Any):
         self.scene = scene
         self.grid = grid
