@@ -360,8 +360,15 @@ def test_particle_count_stays_bounded():
     assert counts[-1] == pytest.approx(counts[-2], rel=0.1)  # steady: emission = deaths by age
 
 
-@pytest.mark.parametrize("override", ["wind.memory=0", "scene.sources.0.velocity=[0.0,0.0,0.0]"])
-def test_a_run_with_bad_settings_stops_before_any_output(run_config, override, tmp_path):
-    with pytest.raises(ConfigError):
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [
+        ("wind.memory=0", "wind.memory"),
+        ("scene.sources.0.velocity=[0.0,0.0,0.0]", "scene.sources[0].velocity"),
+    ],
+)
+def test_a_run_with_bad_settings_stops_before_any_output(run_config, override, key, tmp_path):
+    with pytest.raises(ConfigError) as err:
         run_config(["scene=fence", "wind=particles", override])
+    assert err.value.key == key
     assert not any(tmp_path.rglob("*.nc"))
