@@ -51,29 +51,28 @@ def test_dihedral_angle_of_a_fold():
     assert abs(angle) == pytest.approx(fold)  # 0 when flat
 
 
+def _spring_energy(solver, x, shear: bool) -> float:
+    """Sum of k dL^2 / 2 over the shear (or the stretch) edges at positions x."""
+    t = solver.topology
+    sel = t.edge_shear if shear else ~t.edge_shear
+    d = t.edges[sel]
+    dl = np.linalg.norm(x[d[:, 0]] - x[d[:, 1]], axis=1) - t.edge_length[sel]
+    return 0.5 * np.sum(dl**2 / solver.edge_compliance[sel])
+
+
 def test_uniaxial_stretch_energy_matches_membrane_stiffness():
     mesh = _flag()
-    y_mod = 3000.0
-    s = _solver(mesh, stretch_stiffness=y_mod)
-    t = s.topology
-    eps = 1e-4
+    y_mod, eps = 3000.0, 1e-4
     x = mesh.vertices * [1 + eps, 1, 1]
-    d = t.edges[~t.edge_shear]
-    dl = np.linalg.norm(x[d[:, 0]] - x[d[:, 1]], axis=1) - t.edge_length[~t.edge_shear]
-    energy = 0.5 * np.sum(dl**2 / s.edge_compliance[~t.edge_shear])
+    energy = _spring_energy(_solver(mesh, stretch_stiffness=y_mod), x, shear=False)
     assert energy == pytest.approx(0.5 * y_mod * eps**2 * W * H, rel=1e-3)
 
 
 def test_simple_shear_energy_matches_shear_stiffness():
     mesh = _flag()
-    g_mod = 40.0
-    s = _solver(mesh, shear_stiffness=g_mod)
-    t = s.topology
-    gamma = 1e-5
+    g_mod, gamma = 40.0, 1e-5
     x = mesh.vertices + np.outer(mesh.vertices[:, 1] * gamma, [1, 0, 0])
-    d = t.edges[t.edge_shear]
-    dl = np.linalg.norm(x[d[:, 0]] - x[d[:, 1]], axis=1) - t.edge_length[t.edge_shear]
-    energy = 0.5 * np.sum(dl**2 / s.edge_compliance[t.edge_shear])
+    energy = _spring_energy(_solver(mesh, shear_stiffness=g_mod), x, shear=True)
     assert energy == pytest.approx(0.5 * g_mod * gamma**2 * W * H, rel=1e-3)
 
 
