@@ -124,3 +124,13 @@ def test_cloth_resolution_is_a_command_line_override():
     cfg = compose_config(["scene=flag", "scene.cloths.0.resolution=[64,64]"])
     model = ClothModel.from_meshes(build_scene(cfg.scene).cloths)
     assert model.n_vertices == 64 * 64
+
+
+def test_a_runaway_cloth_stops_the_run_with_status_failed(tmp_path):
+    # an energy bound below anything a falling flag reaches: the first step trips it
+    overrides = ["scene=flag", "sim.duration=0.1", "scene.cloths.0.resolution=[6,4]"]
+    cfg = compose_config([*overrides, "cloth.energy_limit=1e-9", "sim.progress=false"])
+    result = run(cfg, tmp_path)
+    assert result.status == "failed" and "diverged at step 1" in result.failure
+    ds = xr.open_dataset(result.path)
+    assert ds.attrs["status"] == "failed" and "kinetic energy" in ds.attrs["failure"]
