@@ -500,6 +500,15 @@ class XPBDCloth:
         self.edge_order = np.lexsort((path[topo.edges].min(axis=1), topo.edge_shear))
         self.n_stretch = int(np.count_nonzero(~topo.edge_shear))
         self.hinge_order = np.argsort(path[topo.hinges].min(axis=1), kind="stable")
+        eo, ho = self.edge_order, self.hinge_order
+        self._edge_arrays = tuple(
+            np.ascontiguousarray(a[eo])
+            for a in (topo.edges, topo.edge_length, self.edge_compliance, self.edge_damping)
+        )
+        self._hinge_arrays = tuple(
+            np.ascontiguousarray(a[ho])
+            for a in (topo.hinges, topo.hinge_angle, self.hinge_compliance, self.hinge_damping)
+        )
         self.steps = 0
         self.work_in = 0.0  # accumulated positive work of gravity and external forces, J
 
@@ -512,20 +521,13 @@ class XPBDCloth:
         accel = np.ascontiguousarray(self.gravity + f * self.inv_mass[:, None])
         x_new = np.empty_like(x)
         v_new = np.empty_like(v)
-        eo, ho = self.edge_order, self.hinge_order
         xpbd_frame(
             x,
             v,
             self.inv_mass,
             accel,
-            self.topology.edges[eo],
-            self.topology.edge_length[eo],
-            self.edge_compliance[eo],
-            self.edge_damping[eo],
-            self.topology.hinges[ho],
-            self.topology.hinge_angle[ho],
-            self.hinge_compliance[ho],
-            self.hinge_damping[ho],
+            *self._edge_arrays,
+            *self._hinge_arrays,
             self.tether_anchor,
             self.tether_length,
             self.body_kinds,
