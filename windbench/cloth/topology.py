@@ -122,29 +122,6 @@ def build_topology(rest: np.ndarray, triangles: np.ndarray) -> Topology:
     )
 
 
-def color_order(constraints: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
-    """Greedy colouring of constraints so that no two of one colour share a vertex.
-
-    Returns (order, colour) with ``order`` sorting the constraints by colour. Solving them in
-    this order is a Gauss-Seidel sweep like any other (a multicolour one), but consecutive
-    constraints are independent, so the CPU overlaps them instead of waiting for the write
-    of a shared vertex by the previous one (measured: about twice as fast).
-    """
-    m = constraints.shape[0]
-    colour = np.zeros(m, dtype=np.int64)
-    used: list[set[int]] = [set() for _ in range(n_vertices)]
-    for c, row in enumerate(constraints.tolist()):
-        taken = set().union(*(used[v] for v in row))
-        k = 0
-        while k in taken:
-            k += 1
-        colour[c] = k
-        for v in row:
-            used[v].add(k)
-    order = np.argsort(colour, kind="stable")
-    return order, colour[order]
-
-
 def tethers(
     rest: np.ndarray, edges: np.ndarray, pinned: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
