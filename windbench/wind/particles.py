@@ -29,10 +29,10 @@ Choices the paper leaves open (written down here):
   and cloth (``all``: the paper's u(p_col) . n_obj = 0 at every object) or never
   (``none``). The default keeps the paper's no-flow-through condition at walls but lets
   a cloth feel the wind that arrives at it: with ``all``, the cells a cloth sits in hold
-  only the tangential wind, and the §3 drag on an exposed cloth collapses (|F| on the
-  static ``scene=flag`` after 1.5 s: 3.8 N with ``all``, 22.3 N with ``bodies``, 22.7 N
-  with ``none``, 24.6 N from the ``global`` backend). The lee behind the cloth is the same
-  in all three modes: no particle crosses it.
+  only the tangential wind, and the §3 drag on an exposed cloth collapses (|F| on
+  ``scene=flag`` with ``cloth.solver=static`` after 1.5 s: 3.8 N with ``all``, 22.3 N
+  with ``bodies``, 22.7 N with ``none``, 24.6 N from the ``global`` backend). The lee
+  behind the cloth is the same in all three modes: no particle crosses it.
 - *Head-on hits.* A particle whose velocity has no tangential part left after a hit
   (w parallel to n) is removed: its gust has stagnated at the wall. It still marks the
   cell where it stopped (with zero where ``deflected_cells`` makes that hit count).
