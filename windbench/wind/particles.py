@@ -191,12 +191,15 @@ class ParticleWind(WindField):
         durations = np.concatenate([np.full(n_old, dt), new_dur])
         ages = np.concatenate([self._ages, np.zeros(len(new_pos))]) + durations
         t1 = time.perf_counter()
-        if obstacles.cloth_triangles.shape[0]:
-            tri_start, tri_items = triangle_cells(
-                obstacles.cloth_positions, obstacles.cloth_triangles, self.grid
-            )
+        cloth_pos = np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64)
+        cloth_tris = np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64)
+        if cloth_tris.shape[0]:
+            tri_start, tri_items = triangle_cells(cloth_pos, cloth_tris, self.grid)
+            corners = cloth_pos[cloth_tris]  # (m, 3 corners, 3)
+            tri_bounds = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
         else:
             tri_start, tri_items = self._no_triangles
+            tri_bounds = np.zeros((0, 2, 3))
         out = np.empty_like(positions)
         alive = np.empty(len(positions), dtype=np.bool_)
         self._touched, n_touched, crossings = trace_gusts(
@@ -212,8 +215,9 @@ class ParticleWind(WindField):
             self._body_params,
             self._body_start,
             self._body_items,
-            np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64),
-            np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64),
+            cloth_pos,
+            cloth_tris,
+            tri_bounds,
             tri_start,
             tri_items,
             t_end,

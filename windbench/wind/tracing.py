@@ -210,6 +210,7 @@ def trace_gusts(
     body_items,
     cloth_positions,
     cloth_triangles,
+    tri_bounds,
     tri_start,
     tri_items,
     t_now,
@@ -223,8 +224,10 @@ def trace_gusts(
 ):
     """Advance every particle by its duration in its own w_i (p += w_i(p) tau), mark cells.
 
-    ``reach`` (n_cells, n_sources, ROW) is updated in place; ``touched`` collects the cells
-    first marked this step (grown when full). Returns (touched, n_touched, crossings).
+    ``tri_bounds`` (m, 2, 3) are the cloth triangles' bounding boxes (min, max): a cheap
+    test before Möller-Trumbore. ``reach`` (n_cells, n_sources, ROW) is updated in place;
+    ``touched`` collects the cells first marked this step (grown when full). Returns
+    (touched, n_touched, crossings).
     """
     ny, nz = shape[1], shape[2]
     n_touched = 0
@@ -308,6 +311,15 @@ def trace_gusts(
                         hit_n[:] = tmp_n
                 for m in range(tri_start[cell], tri_start[cell + 1]):
                     tri = tri_items[m]
+                    # bounding boxes apart: the piece cannot meet this triangle
+                    apart = False
+                    for ax in range(3):
+                        lo_ab = min(a[ax], b[ax])
+                        hi_ab = max(a[ax], b[ax])
+                        if lo_ab > tri_bounds[tri, 1, ax] or hi_ab < tri_bounds[tri, 0, ax]:
+                            apart = True
+                    if apart:
+                        continue
                     va = cloth_positions[cloth_triangles[tri, 0]]
                     vb = cloth_positions[cloth_triangles[tri, 1]]
                     vc = cloth_positions[cloth_triangles[tri, 2]]
