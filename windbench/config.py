@@ -69,6 +69,21 @@ class GlobalWindConfig(WindConfig):
 
 
 @dataclass
+class ParticleWindConfig(WindConfig):
+    """Backend ``particles`` (paper §4.2.2); see windbench.wind.particles and .emission."""
+
+    name: str = "particles"
+    particles_per_second: float | None = None  # per source; null: particles_per_cell rule
+    particles_per_cell: float = 2.0  # automatic rate: new particles per emitter cell per memory
+    max_particles: int = 1_000_000  # cap on live particles (all sources)
+    max_age: float = 10.0  # s; older particles die
+    memory: float = 0.1  # s; a cell keeps a source's wind this long after its last particle
+    max_hits: int = 8  # collisions per particle per step before it waits for the next step
+    deflected_cells: str = "bodies"  # which hits make later marks w - (n.w) n: all|bodies|none
+    seed: int = 0  # conf/wind/particles.yaml sets ${seed}
+
+
+@dataclass
 class GridConfig:
     resolution: int = 32  # cells along the longest domain axis
 
@@ -91,8 +106,32 @@ class AeroConfig:
 
 
 @dataclass
+class ClothMaterialConfig:
+    """Default cloth material (SI); a cloth's own ``material`` dict overrides any key.
+
+    Defaults: a light woven flag fabric (Kawabata-range figures): 0.15 kg/m^2, tensile
+    stiffness 5000 N/m, shear 50 N/m, bending 1e-5 N m, Rayleigh damping time 1 ms.
+    """
+
+    density: float = 0.15  # kg/m^2, mass per area
+    stretch_stiffness: float = 5000.0  # N/m, membrane (tensile) stiffness Y
+    shear_stiffness: float = 50.0  # N/m, in-plane shear stiffness G
+    bend_stiffness: float = 1e-5  # N m, bending stiffness B
+    damping: float = 1e-3  # s, stiffness-proportional damping time
+
+
+@dataclass
 class ClothConfig:
-    solver: str = "static"  # see windbench.cloth.SOLVERS
+    """Cloth solver settings; see windbench.cloth.solver for the XPBD scheme."""
+
+    solver: str = "xpbd"  # see windbench.cloth.SOLVERS (xpbd | static)
+    substeps: int = 8  # XPBD substeps per sim.dt
+    edge_iterations: int = 4  # Gauss-Seidel passes over the stretch/shear edges per substep
+    gravity: float = 9.81  # m/s^2, along -z
+    collision_margin: float = 0.005  # m, cloth keeps this distance from bodies
+    friction: float = 0.3  # Coulomb coefficient cloth/body
+    energy_limit: float = 10.0  # diverged: kinetic energy > limit x work done on the cloth
+    material: ClothMaterialConfig = field(default_factory=ClothMaterialConfig)
 
 
 @dataclass
@@ -116,7 +155,7 @@ class WindbenchConfig:
     experiment: str | None = None
 
 
-WIND_SCHEMAS: dict[str, type] = {"global": GlobalWindConfig}
+WIND_SCHEMAS: dict[str, type] = {"global": GlobalWindConfig, "particles": ParticleWindConfig}
 
 
 def register_configs() -> None:
