@@ -215,10 +215,13 @@ def test_hydra_multirun_smoke_then_report(tmp_path):
     summary = pd.read_csv(out / "summary.csv")
     n_runs = len(list(sweep_dir.rglob("windbench.nc")))
     assert n_runs >= 1
-    assert len(summary) == n_runs + 1  # one row per run, the refused one included
+    # one row per run, the refused ones (resolution 2, one per backend) included
+    assert len(summary) == 2 * n_runs
     invalid = summary[summary["status"] == "invalid"]
-    assert len(invalid) == 1 and "grid.resolution" in invalid["failure"].iloc[0]
-    assert invalid["resolution"].iloc[0] == 2  # its settings, from Hydra's saved config
+    assert len(invalid) == n_runs
+    assert invalid["failure"].str.contains("grid.resolution").all()
+    assert (invalid["resolution"] == 2).all()  # their settings, from Hydra's saved config
+    assert set(invalid["wind"]) == set(summary[summary["status"] == "complete"]["wind"])
     assert (out / "index.html").stat().st_size > 10_000
 
 
