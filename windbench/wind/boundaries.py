@@ -224,8 +224,6 @@ def free_faces(a, kinds, solid, free):
                 if along == 0:
                     if lo_kind == PERIODIC:
                         im, jm, km = im % nx, jm % ny, km % nz
-                        if n[a] == 1:
-                            continue  # a one-cell periodic axis: the face meets itself
                     elif lo_kind != OUTFLOW and lo_kind != OPENING:
                         continue
                     else:

@@ -56,7 +56,10 @@ def cell_normals(positions, velocities, triangles, start, items, index, normals,
             normals[m] = nsum / norm
         else:
             normals[m] = 0.0
-        velocity[m] = vsum / asum if asum > 0.0 else 0.0
+        if asum > 0.0:
+            velocity[m] = vsum / asum
+        else:
+            velocity[m] = 0.0
 
 
 @njit(cache=True, inline="always")

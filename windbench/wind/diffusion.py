@@ -18,26 +18,25 @@ from numba import njit, prange
 
 
 @njit(cache=True)
-def _plane(q, q0, I, colour, alpha, free):
+def _plane(q, q0, I, colour, alpha, axes, free):
     """Gauss-Seidel update of the faces of colour ``colour`` in the padded plane I."""
     P0, P1, P2 = q.shape
     change = 0.0
-    inv = 1.0 / (1.0 + 6.0 * alpha)
+    inv = 1.0 / (1.0 + 2.0 * alpha * (axes[0] + axes[1] + axes[2]))
     for J in range(1, P1 - 1):
         for K in range(1, P2 - 1):
             if (I + J + K) % 2 != colour:
                 continue
             if not free[I, J, K]:
                 continue
-            # q = (q0 + alpha sum nb) / (1 + 6 alpha)
-            nb = (
-                q[I - 1, J, K]
-                + q[I + 1, J, K]
-                + q[I, J - 1, K]
-                + q[I, J + 1, K]
-                + q[I, J, K - 1]
-                + q[I, J, K + 1]
-            )
+            # q = (q0 + alpha sum nb) / (1 + 2 alpha d), d = number of active axes
+            nb = 0.0
+            if axes[0]:
+                nb += q[I - 1, J, K] + q[I + 1, J, K]
+            if axes[1]:
+                nb += q[I, J - 1, K] + q[I, J + 1, K]
+            if axes[2]:
+                nb += q[I, J, K - 1] + q[I, J, K + 1]
             new = (q0[I, J, K] + alpha * nb) * inv
             change = max(change, abs(new - q[I, J, K]))
             q[I, J, K] = new
@@ -45,11 +44,13 @@ def _plane(q, q0, I, colour, alpha, free):
 
 
 @njit(cache=True, parallel=True)
-def gauss_seidel_half(q, q0, colour, alpha, free, changes):
+def gauss_seidel_half(q, q0, colour, alpha, axes, free, changes):
     """One colour of a red-black sweep; ``changes[I]`` = largest update in plane I.
 
     Neighbours across a periodic boundary are read from the ghost layer (refilled between
     half sweeps), so no two threads ever touch the same value: bit-reproducible.
+    ``axes[b] = 0`` drops axis b: a one-cell periodic axis, whose neighbours are the face
+    itself (the 2D problems), so its terms cancel exactly.
     """
     for I in prange(1, q.shape[0] - 1):
-        changes[I] = _plane(q, q0, I, colour, alpha, free)
+        changes[I] = _plane(q, q0, I, colour, alpha, axes, free)

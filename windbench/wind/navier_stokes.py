@@ -195,7 +195,9 @@ def face_weights(free, a, periodic, out):
         for j in range(n1):
             for k in range(n2):
                 out[i, j, k] = free[i + 1, j + 1, k + 1]
-    if periodic[a]:  # the duplicate last face carries the first one's weight
+    if periodic[a] and out.shape[a] == 2:  # one periodic cell: the face meets itself
+        out[...] = 0.0
+    elif periodic[a]:  # the duplicate last face carries the first one's weight
         if a == 0:
             out[n0 - 1] = out[0]
         elif a == 1:
@@ -252,6 +254,8 @@ class NavierStokesWind(WindField):
         self.solid = self._solid.astype(np.uint8)
         self.kinds = self._face_kinds(scene)
         self.periodic = np.array([self.kinds[2 * a] == PERIODIC for a in range(3)])
+        # axes that carry a derivative: not a one-cell periodic axis (2D problems)
+        self.axes = np.array([not (self.periodic[a] and shape[a] == 1) for a in range(3)], np.int64)
         self.origins = np.stack([component_origin(self.lower, self.h, a) for a in range(3)])
         walls = [
             np.asarray(scene.wall_velocity.get(f, np.zeros(3)), dtype=float)
@@ -338,6 +342,15 @@ class NavierStokesWind(WindField):
         self._apply_boundaries(set_normal=True)
         self._project()
 
+    def set_velocity(self, field) -> None:
+        """Replace the state by ``field(points (n, 3)) -> (n, 3)`` sampled at the faces,
+        then impose the boundaries and project (for validation problems and tests)."""
+        for a in range(3):
+            pts = self._face_points(a)
+            self.q[a][...] = np.asarray(field(pts.reshape(-1, 3)))[:, a].reshape(pts.shape[:3])
+        self._apply_boundaries(set_normal=True)
+        self._project()
+
     def _face_points(self, a) -> np.ndarray:
         shp = self.q[a].shape
         o = self.origins[a]
@@ -388,10 +401,12 @@ class NavierStokesWind(WindField):
         self._apply_boundaries(set_normal=True)
 
     def _forces(self, dt):
+        forced = bool(np.any(self.body_force != 0.0))
         for a in range(3):
             if self.body_force[a] != 0.0:
                 add_force(self.q[a], self.free[a], self.body_force[a] * dt)
         if self.prim_kinds.size and self.relaxation > 0:
+            forced = True
             factor = 1.0 - np.exp(-self.relaxation * dt)
             for a in range(3):
                 relax_to_primitives(
@@ -405,6 +420,8 @@ class NavierStokesWind(WindField):
                     factor,
                     self.free[a],
                 )
+        if forced:  # ghosts and periodic copies must see the new values
+            self._apply_boundaries(set_normal=True)
 
     def _diffuse(self, dt) -> int:
         alpha = self.viscosity * dt / self.h**2
@@ -422,7 +439,7 @@ class NavierStokesWind(WindField):
                 for colour in (0, 1):
                     changes[:] = 0.0
                     diffusion.gauss_seidel_half(
-                        self.q[a], self.work[a], colour, alpha, self.free[a], changes
+                        self.q[a], self.work[a], colour, alpha, self.axes, self.free[a], changes
                     )
                     change = max(change, changes.max())
                     boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], False)
