@@ -34,90 +34,92 @@ PRE_SWEEPS = 2
 
 
 @njit(cache=True, inline="always")
-def _nb_sum(x, wx, wy, wz, coef, periodic, i, j, k):
-    """(sum_f c w_f x_nb, diag = sum_f c w_f) around cell (i, j, k); ghost x = 0."""
+def _nb_sum(x, wx, wy, wz, periodic, i, j, k):
+    """(sum_f w_f x_nb, diag = sum_f w_f) around cell (i, j, k); ghost x = 0 outside.
+
+    The weights already carry the level's (h/H)^2 factor. Interior cells take a branch-free
+    path (a closed face has w = 0, so it drops out of both sums).
+    """
     nx, ny, nz = x.shape
+    w0 = wx[i, j, k]
+    w1 = wx[i + 1, j, k]
+    w2 = wy[i, j, k]
+    w3 = wy[i, j + 1, k]
+    w4 = wz[i, j, k]
+    w5 = wz[i, j, k + 1]
+    d = w0 + w1 + w2 + w3 + w4 + w5
+    if 0 < i < nx - 1 and 0 < j < ny - 1 and 0 < k < nz - 1:
+        s = (
+            w0 * x[i - 1, j, k]
+            + w1 * x[i + 1, j, k]
+            + w2 * x[i, j - 1, k]
+            + w3 * x[i, j + 1, k]
+            + w4 * x[i, j, k - 1]
+            + w5 * x[i, j, k + 1]
+        )
+        return s, d
     s = 0.0
-    d = 0.0
-    w = wx[i, j, k] * coef[0]
-    if w != 0.0:
-        d += w
-        if i > 0:
-            s += w * x[i - 1, j, k]
-        elif periodic[0]:
-            s += w * x[nx - 1, j, k]
-    w = wx[i + 1, j, k] * coef[0]
-    if w != 0.0:
-        d += w
-        if i < nx - 1:
-            s += w * x[i + 1, j, k]
-        elif periodic[0]:
-            s += w * x[0, j, k]
-    w = wy[i, j, k] * coef[1]
-    if w != 0.0:
-        d += w
-        if j > 0:
-            s += w * x[i, j - 1, k]
-        elif periodic[1]:
-            s += w * x[i, ny - 1, k]
-    w = wy[i, j + 1, k] * coef[1]
-    if w != 0.0:
-        d += w
-        if j < ny - 1:
-            s += w * x[i, j + 1, k]
-        elif periodic[1]:
-            s += w * x[i, 0, k]
-    w = wz[i, j, k] * coef[2]
-    if w != 0.0:
-        d += w
-        if k > 0:
-            s += w * x[i, j, k - 1]
-        elif periodic[2]:
-            s += w * x[i, j, nz - 1]
-    w = wz[i, j, k + 1] * coef[2]
-    if w != 0.0:
-        d += w
-        if k < nz - 1:
-            s += w * x[i, j, k + 1]
-        elif periodic[2]:
-            s += w * x[i, j, 0]
+    if i > 0:
+        s += w0 * x[i - 1, j, k]
+    elif periodic[0]:
+        s += w0 * x[nx - 1, j, k]
+    if i < nx - 1:
+        s += w1 * x[i + 1, j, k]
+    elif periodic[0]:
+        s += w1 * x[0, j, k]
+    if j > 0:
+        s += w2 * x[i, j - 1, k]
+    elif periodic[1]:
+        s += w2 * x[i, ny - 1, k]
+    if j < ny - 1:
+        s += w3 * x[i, j + 1, k]
+    elif periodic[1]:
+        s += w3 * x[i, 0, k]
+    if k > 0:
+        s += w4 * x[i, j, k - 1]
+    elif periodic[2]:
+        s += w4 * x[i, j, nz - 1]
+    if k < nz - 1:
+        s += w5 * x[i, j, k + 1]
+    elif periodic[2]:
+        s += w5 * x[i, j, 0]
     return s, d
 
 
 @njit(cache=True, parallel=True)
-def residual(x, b, wx, wy, wz, coef, periodic, out):
+def residual(x, b, wx, wy, wz, periodic, out):
     """out = b - A x."""
     nx, ny, nz = x.shape
     for i in prange(nx):
         for j in range(ny):
             for k in range(nz):
-                s, d = _nb_sum(x, wx, wy, wz, coef, periodic, i, j, k)
+                s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
                 out[i, j, k] = b[i, j, k] - (d * x[i, j, k] - s)
 
 
 @njit(cache=True, parallel=True)
-def apply_operator(x, wx, wy, wz, coef, periodic, out):
+def apply_operator(x, wx, wy, wz, periodic, out):
     """out = A x = sum_f c w_f (x_c - x_nb)."""
     nx, ny, nz = x.shape
     for i in prange(nx):
         for j in range(ny):
             for k in range(nz):
-                s, d = _nb_sum(x, wx, wy, wz, coef, periodic, i, j, k)
+                s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
                 out[i, j, k] = d * x[i, j, k] - s
 
 
 @njit(cache=True)
-def _gs_plane(x, b, wx, wy, wz, coef, periodic, i, colour):
+def _gs_plane(x, b, wx, wy, wz, periodic, i, colour):
     nx, ny, nz = x.shape
     for j in range(ny):
         for k in range((i + j + colour) % 2, nz, 2):
-            s, d = _nb_sum(x, wx, wy, wz, coef, periodic, i, j, k)
+            s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
             if d > 0.0:
                 x[i, j, k] = (b[i, j, k] + s) / d  # (A x)_c = b_c solved for x_c
 
 
 @njit(cache=True, parallel=True)
-def gauss_seidel(x, b, wx, wy, wz, coef, periodic, colour):
+def gauss_seidel(x, b, wx, wy, wz, periodic, colour):
     """One colour (cells with (i+j+k) % 2 == colour) of red-black Gauss-Seidel on A x = b.
 
     On a periodic x axis with an odd number of planes the last plane neighbours the first
@@ -126,9 +128,9 @@ def gauss_seidel(x, b, wx, wy, wz, coef, periodic, colour):
     nx = x.shape[0]
     last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
     for i in prange(last):
-        _gs_plane(x, b, wx, wy, wz, coef, periodic, i, colour)
+        _gs_plane(x, b, wx, wy, wz, periodic, i, colour)
     for i in range(last, nx):
-        _gs_plane(x, b, wx, wy, wz, coef, periodic, i, colour)
+        _gs_plane(x, b, wx, wy, wz, periodic, i, colour)
 
 
 @njit(cache=True, parallel=True)
@@ -233,7 +235,7 @@ class _Level:
         self.ratio = np.ones(3, dtype=np.int64)  # to the next coarser level
 
     def args(self):
-        return (self.w[0], self.w[1], self.w[2], self.coef, self.periodic)
+        return (self.w[0], self.w[1], self.w[2], self.periodic)
 
     def smooth(self, x, b, sweeps, reverse):
         for _ in range(sweeps):
@@ -281,16 +283,15 @@ class MultigridPoisson:
         for lev, nxt in zip(self.levels[:-1], self.levels[1:], strict=True):
             for a in range(3):
                 coarsen_weights(lev.w[a], a, lev.ratio, nxt.w[a])
+        for lev in self.levels[1:]:  # the coarse operators' (h/H)^2 per axis
+            for a in range(3):
+                lev.w[a] *= lev.coef[a]
         self.active[...] = self._diag_positive(fine)  # cells with an open face
 
     @staticmethod
     def _diag_positive(level) -> np.ndarray:
         w = level.w
-        return (
-            (w[0][:-1] + w[0][1:]) * level.coef[0]
-            + (w[1][:, :-1] + w[1][:, 1:]) * level.coef[1]
-            + (w[2][:, :, :-1] + w[2][:, :, 1:]) * level.coef[2]
-        ) > 0
+        return ((w[0][:-1] + w[0][1:]) + (w[1][:, :-1] + w[1][:, 1:]) + (w[2][:, :, :-1] + w[2][:, :, 1:])) > 0
 
     def vcycle(self, r, z):
         """z = M r: one symmetric V-cycle from a zero guess."""
