@@ -52,7 +52,12 @@ def array_bytes(obj) -> int:
 
 def bench(resolution: int, steps: int, advection: str) -> dict:
     cfg = compose_config(
-        ["wind=navier_stokes", "scene=fence", f"grid.resolution={resolution}", f"wind.advection={advection}"]
+        [
+            "wind=navier_stokes",
+            "scene=fence",
+            f"grid.resolution={resolution}",
+            f"wind.advection={advection}",
+        ]
     )
     setup = prepare(cfg)
     t0 = time.perf_counter()

@@ -114,7 +114,7 @@ def advect(q, a, u, v, w, origins, lower, extent, periodic, h, dt, out, qmin, qm
                     qmax[I, J, K] = hi
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def maccormack_correct(q, q_hat, q_tilde, qmin, qmax, out):
     """out = clamp(q^ + (q - q~)/2, qmin, qmax) on the interior (Selle et al. 2008)."""
     P0, P1, P2 = q.shape

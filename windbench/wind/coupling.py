@@ -78,7 +78,7 @@ def _other(q, b, a, I, J, K):
     )
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def remove_normal_component(q, a, u, v, w, index, normals, velocity, out):
     """out = q - ((u_air - v_cloth) . n) n_a on faces of component a next to marked cells.
 

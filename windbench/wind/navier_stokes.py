@@ -59,7 +59,6 @@ from windbench.wind.base import Obstacles, WindField
 from windbench.wind.boundaries import (
     INFLOW,
     KIND_CODES,
-    NO_SLIP,
     OPENING,
     OUTFLOW,
     PERIODIC,
@@ -83,7 +82,7 @@ DIFFUSION_MAX_SWEEPS = 500
 # ---------------------------------------------------------------- kernels (pure functions)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def face_flux(u, v, w, target, out):
     """out_c = h div u - target_c = sum of outward face velocities of cell c - target_c."""
     nx, ny, nz = out.shape
@@ -101,7 +100,7 @@ def face_flux(u, v, w, target, out):
                 )
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def subtract_gradient(q, a, psi, free, periodic):
     """q_f -= psi_+ - psi_- on the free faces of component a (ghost psi = 0 at openings)."""
     nx, ny, nz = psi.shape
@@ -131,7 +130,7 @@ def subtract_gradient(q, a, psi, free, periodic):
                 q[I, J, K] -= plus - minus  # u_f <- u_f - (psi_+ - psi_-)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def cell_centred(u, v, w, solid, out):
     """out = mean of the two faces per axis at each cell centre; 0 in solid cells."""
     nx, ny, nz = solid.shape
@@ -148,7 +147,7 @@ def cell_centred(u, v, w, solid, out):
                 out[i, j, k, 2] = 0.5 * (w[i + 1, j + 1, k + 1] + w[i + 1, j + 1, k + 2])
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def add_force(q, free, dv):
     """q += dv on the free faces (dv = f_a dt, a uniform body force)."""
     P0, P1, P2 = q.shape
@@ -159,7 +158,7 @@ def add_force(q, free, dv):
                     q[I, J, K] += dv
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def relax_to_primitives(q, a, origin, h, kinds, params, radii, factor, free):
     """q += factor chi_i (w_i,a - q) per interior primitive i, chi_i = exp(-(d/r_i)^2)."""
     P0, P1, P2 = q.shape
@@ -313,9 +312,7 @@ class NavierStokesWind(WindField):
         """Inflow wind at points of ``face``: uniform sources only where they blow in."""
         b = face // 2
         n_out = -1.0 if face % 2 == 0 else 1.0
-        chosen = [
-            s for s in self.scene.sources if s.kind != "uniform" or s.velocity[b] * n_out < 0
-        ]
+        chosen = [s for s in self.scene.sources if s.kind != "uniform" or s.velocity[b] * n_out < 0]
         return superpose(chosen, points)
 
     def _mass_sources(self, interior) -> np.ndarray:
@@ -382,17 +379,47 @@ class NavierStokesWind(WindField):
         if self.advection == "semi_lagrangian":
             for a in range(3):
                 advection.advect(
-                    self.q[a], a, u, v, w, *args, dt, self.work[a], self.work[a], self.work[a], False
+                    self.q[a],
+                    a,
+                    u,
+                    v,
+                    w,
+                    *args,
+                    dt,
+                    self.work[a],
+                    self.work[a],
+                    self.work[a],
+                    False,
                 )
         else:
             for a in range(3):
                 advection.advect(
-                    self.q[a], a, u, v, w, *args, dt, self.work2[a], self.qmin[a], self.qmax[a], True
+                    self.q[a],
+                    a,
+                    u,
+                    v,
+                    w,
+                    *args,
+                    dt,
+                    self.work2[a],
+                    self.qmin[a],
+                    self.qmax[a],
+                    True,
                 )
             self._fill(self.work2)
             for a in range(3):
                 advection.advect(
-                    self.work2[a], a, u, v, w, *args, -dt, self.work[a], self.work[a], self.work[a], False
+                    self.work2[a],
+                    a,
+                    u,
+                    v,
+                    w,
+                    *args,
+                    -dt,
+                    self.work[a],
+                    self.work[a],
+                    self.work[a],
+                    False,
                 )
                 advection.maccormack_correct(
                     self.q[a], self.work2[a], self.work[a], self.qmin[a], self.qmax[a], self.work[a]
@@ -526,7 +553,9 @@ class NavierStokesWind(WindField):
             "pressure_residual": float(res),
             "pressure_rhs_norm": rhs_norm,
             "mac_divergence_max": float(scaled.max()) if scaled.size else float("nan"),
-            "mac_divergence_rms": float(np.sqrt(np.mean(scaled**2))) if scaled.size else float("nan"),
+            "mac_divergence_rms": float(np.sqrt(np.mean(scaled**2)))
+            if scaled.size
+            else float("nan"),
             "diffusion_sweeps": float(sweeps),
             "cfl": float(speed * dt / self.h),
             "cloth_cells": float(marked),

@@ -133,7 +133,7 @@ def gauss_seidel(x, b, wx, wy, wz, periodic, colour):
         _gs_plane(x, b, wx, wy, wz, periodic, i, colour)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def restrict_mean(fine, ratio, coarse):
     """coarse[I,J,K] = mean of the fine cells it covers."""
     n0, n1, n2 = coarse.shape
@@ -149,7 +149,7 @@ def restrict_mean(fine, ratio, coarse):
                 coarse[I, J, K] = acc * inv
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def prolong_add(coarse, ratio, fine):
     """fine += coarse value of the parent cell (injection)."""
     n0, n1, n2 = fine.shape
@@ -159,7 +159,7 @@ def prolong_add(coarse, ratio, fine):
                 fine[i, j, k] += coarse[i // ratio[0], j // ratio[1], k // ratio[2]]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def coarsen_weights(fine, a, ratio, coarse):
     """Coarse face weight = mean of the fine face weights it covers (faces normal to a)."""
     n0, n1, n2 = coarse.shape
@@ -181,7 +181,7 @@ def coarsen_weights(fine, a, ratio, coarse):
                 coarse[I, J, K] = acc * inv
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def dot(a, b):
     acc = 0.0
     for i in prange(a.shape[0]):
@@ -189,14 +189,14 @@ def dot(a, b):
     return acc
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def axpy(alpha, x, y):
     """y += alpha x."""
     for i in prange(x.shape[0]):
         y[i] += alpha * x[i]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def xpby(x, beta, y):
     """y = x + beta y."""
     for i in prange(x.shape[0]):
@@ -228,7 +228,11 @@ class _Level:
         self.coef = np.asarray(coef, dtype=np.float64)
         self.periodic = periodic
         nx, ny, nz = self.shape
-        self.w = [np.zeros((nx + 1, ny, nz)), np.zeros((nx, ny + 1, nz)), np.zeros((nx, ny, nz + 1))]
+        self.w = [
+            np.zeros((nx + 1, ny, nz)),
+            np.zeros((nx, ny + 1, nz)),
+            np.zeros((nx, ny, nz + 1)),
+        ]
         self.x = np.zeros(self.shape) if work else None  # the finest level borrows CG's
         self.b = np.zeros(self.shape) if work else None
         self.r = np.zeros(self.shape)
@@ -291,7 +295,11 @@ class MultigridPoisson:
     @staticmethod
     def _diag_positive(level) -> np.ndarray:
         w = level.w
-        return ((w[0][:-1] + w[0][1:]) + (w[1][:, :-1] + w[1][:, 1:]) + (w[2][:, :, :-1] + w[2][:, :, 1:])) > 0
+        return (
+            (w[0][:-1] + w[0][1:])
+            + (w[1][:, :-1] + w[1][:, 1:])
+            + (w[2][:, :, :-1] + w[2][:, :, 1:])
+        ) > 0
 
     def vcycle(self, r, z):
         """z = M r: one symmetric V-cycle from a zero guess."""
