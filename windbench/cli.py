@@ -18,6 +18,7 @@ from omegaconf import DictConfig
 
 from windbench.config import register_configs
 from windbench.errors import ConfigError
+from windbench.sweep import already_done, remove_stale_temporaries, write_status
 
 CONFIG_DIR = str(Path(__file__).resolve().parent.parent / "conf")
 log = logging.getLogger("windbench")
@@ -30,13 +31,20 @@ def _task(cfg: DictConfig) -> str:
 
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     multirun = HydraConfig.get().mode == RunMode.MULTIRUN
+    remove_stale_temporaries(out_dir)
+    if cfg.resume and already_done(cfg, out_dir / cfg.output.filename):
+        log.info("resume: %s is complete with the same config, skipped", out_dir)
+        write_status(out_dir, "skipped")
+        return "skipped"
     try:
         result = run(cfg, out_dir)
     except ConfigError as err:
         print(f"windbench: error: {err}", file=sys.stderr)
+        write_status(out_dir, "invalid", reason=str(err))
         if multirun:
             return "invalid"
         sys.exit(2)
+    write_status(out_dir, result.status, failure=result.failure)
     if result.status == "failed":
         print(f"windbench: run failed: {result.failure} (dataset: {result.path})", file=sys.stderr)
         if not multirun:

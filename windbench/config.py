@@ -93,6 +93,7 @@ class SimConfig:
     dt: float = 1.0 / 60.0  # s
     duration: float = 1.0  # s of simulated time
     progress: bool = True  # tqdm bar (only on a terminal)
+    fail_at_step: int | None = None  # fault injection: the run diverges at this step (tests)
 
 
 @dataclass

@@ -44,19 +44,25 @@ def central_divergence(u, solid, h, out):
                 ) / (2.0 * h)
 
 
-def divergence_figures(u, solid, h, reference_speed) -> tuple[float, float]:
-    """(rms, max) of |div u| h / U_ref over interior air cells; (nan, nan) if there are none.
+def central_divergence_field(u, solid, h) -> np.ndarray:
+    """div u per cell by central differences (NaN where a neighbour is not air).
 
-    Axes one cell thick (2D problems) are skipped: their derivative is zero by symmetry.
+    Axes one cell thick (2D problems) are replicated so their derivative is zero.
     """
     u = np.ascontiguousarray(u, dtype=np.float64)
     solid = np.ascontiguousarray(solid)
-    pad = [(1, 1) if n == 1 else (0, 0) for n in u.shape[:3]]
-    if any(p != (0, 0) for p in pad):  # a one-cell axis: replicate it so its terms vanish
-        u = np.pad(u, pad + [(0, 0)], mode="edge")
+    thin = [n == 1 for n in u.shape[:3]]
+    if any(thin):
+        pad = [(1, 1) if t else (0, 0) for t in thin]
+        u = np.pad(u, [*pad, (0, 0)], mode="edge")
         solid = np.pad(solid, pad, mode="edge")
     div = np.empty(u.shape[:3])
     central_divergence(u, solid, h, div)
+    return div[tuple(slice(1, 2) if t else slice(None) for t in thin)]
+
+
+def divergence_figures(div, h, reference_speed) -> tuple[float, float]:
+    """(rms, max) of |div u| h / U_ref over the finite entries of ``div``; nan if none."""
     vals = np.abs(div[np.isfinite(div)]) * h / reference_speed
     if vals.size == 0:
         return float("nan"), float("nan")

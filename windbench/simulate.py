@@ -9,6 +9,8 @@ to the cloth solver.
 
 from __future__ import annotations
 
+import logging
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -32,9 +34,10 @@ from windbench.scenes import Scene, build_scene
 from windbench.wind import backend_class, make_wind
 from windbench.wind.base import Obstacles
 
+log = logging.getLogger("windbench")
 PHASES = ("wind", "aero", "cloth", "total")
-MAX_CELLS = 256**3  # the largest grid a run may ask for (memory, see prepare)
 BYTES_PER_CELL = 40 * 8  # budget of the heaviest backend: 40 float64 values per cell
+MEMORY_FRACTION = 0.8  # of physical memory a run may plan to use
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,7 @@ class RunSetup:
     n_steps: int
     snapshot_steps: tuple[int, ...]
     probe_points: dict[str, np.ndarray]
+    cfl: float  # fastest source speed x dt / h
 
 
 def _require(cond: bool, key: str, message: str):
@@ -69,14 +73,7 @@ def prepare(cfg: DictConfig) -> RunSetup:
     backend_class(cfg.wind.name)  # unknown backend: error listing the allowed ones
     scene = build_scene(cfg.scene)
     resolution = int(cfg.grid.resolution)
-    extent = scene.upper - scene.lower
-    cells = np.prod(np.maximum(1, np.round(extent / (extent.max() / max(resolution, 1)))))
-    _require(
-        cells <= MAX_CELLS,
-        "grid.resolution",
-        f"{resolution} gives {int(cells)} cells, about {cells * BYTES_PER_CELL / 2**30:.1f} GiB; "
-        f"the limit is {MAX_CELLS} cells",
-    )
+    _check_memory(scene, resolution)
     grid = Grid.from_domain(scene.lower, scene.upper, resolution)
     _check_bodies_resolved(scene, grid)
     for probe in ("lee", "free_stream"):
@@ -85,6 +82,9 @@ def prepare(cfg: DictConfig) -> RunSetup:
             f"scene.probes.{probe}",
             "is required when a scene has probes (lee and free_stream go together)",
         )
+    backend = backend_class(cfg.wind.name)
+    backend.check(scene, grid, cfg.wind)
+    cfl = _check_cfl(scene, grid, dt, backend)
     n_steps = int(round(duration / dt))
     snaps = np.unique(np.round(np.linspace(0, n_steps, cfg.output.snapshots + 1)[1:]).astype(int))
     model = ClothModel.from_meshes(scene.cloths)
@@ -99,7 +99,56 @@ def prepare(cfg: DictConfig) -> RunSetup:
         n_steps=n_steps,
         snapshot_steps=tuple(int(s) for s in snaps if s >= 1),
         probe_points={k: b.lattice(int(cfg.output.probe_points)) for k, b in scene.probes.items()},
+        cfl=cfl,
     )
+
+
+def memory_bytes() -> int:
+    """Physical memory of this machine (bytes)."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def _check_memory(scene: Scene, resolution: int):
+    """The grid must fit in memory at BYTES_PER_CELL; say how much it would need."""
+    extent = scene.upper - scene.lower
+    shape = np.maximum(1, np.round(extent / (extent.max() / max(resolution, 1))))
+    need = float(np.prod(shape)) * BYTES_PER_CELL
+    limit = MEMORY_FRACTION * memory_bytes()
+    _require(
+        need <= limit,
+        "grid.resolution",
+        f"{resolution} gives {int(np.prod(shape))} cells needing about {need / 2**30:.1f} GiB "
+        f"({BYTES_PER_CELL // 8} float64 per cell); this machine allows {limit / 2**30:.1f} GiB",
+    )
+
+
+def _check_cfl(scene: Scene, grid: Grid, dt: float, backend) -> float:
+    """CFL = U dt / h with U the fastest source (or wall) speed; warn or refuse.
+
+    Above the backend's ``max_cfl`` a warning is logged (accuracy suffers); when the wind
+    would cross the whole domain in one step the run is meaningless and refused.
+    """
+    speeds = [s.speed_scale() for s in scene.sources]
+    speeds += [float(np.linalg.norm(v)) for v in scene.wall_velocity.values()]
+    speed = max(speeds, default=0.0)
+    cfl = speed * dt / grid.h
+    longest = float((scene.upper - scene.lower).max())
+    _require(
+        speed * dt <= longest,
+        "sim.dt",
+        f"{dt} s lets the wind ({speed:.3g} m/s) cross the whole domain ({longest} m) in one "
+        f"step (CFL {cfl:.3g}); use sim.dt <= {longest / speed:.3g}",
+    )
+    if cfl > backend.max_cfl:
+        log.warning(
+            "CFL number %.3g exceeds %.3g, the stable range of backend %s",
+            cfl,
+            backend.max_cfl,
+            backend.name,
+        )
+    else:
+        log.info("CFL number %.3g", cfl)
+    return cfl
 
 
 def _check_bodies_resolved(scene: Scene, grid: Grid):
@@ -219,6 +268,7 @@ class Recorder:
             grid_shape=list(s.grid.shape),
             grid_spacing=s.grid.h,
             reference_speed=s.scene.reference_speed,
+            cfl=s.cfl,
             config=OmegaConf.to_yaml(cfg, resolve=True),
             status=status,
             failure=failure,
@@ -233,12 +283,12 @@ class Recorder:
 class Simulation:
     """Owns the loop: wind, aerodynamics, cloth, figures, NaN checks."""
 
-    def __init__(self, setup: RunSetup):
+    def __init__(self, setup: RunSetup, recorder: Recorder | None = None):
         self.setup = setup
+        self.recorder = recorder or Recorder(setup)
         self.wind = make_wind(setup.cfg.wind, setup.scene, setup.grid)
         self.cloth_solver = make_cloth_solver(setup.cfg.cloth, setup.cloth, setup.scene.bodies)
         self.state: ClothState = setup.cloth.initial_state()
-        self.recorder = Recorder(setup)
 
     def obstacles(self) -> Obstacles:
         return Obstacles(
@@ -250,6 +300,8 @@ class Simulation:
 
     def step(self, n: int):
         s = self.setup
+        if s.cfg.sim.fail_at_step is not None and n + 1 >= s.cfg.sim.fail_at_step:
+            raise SimulationDiverged(n + 1, "fault injected by sim.fail_at_step (testing)")
         t0 = time.perf_counter()
         self.wind.step(s.dt, self.obstacles())
         t1 = time.perf_counter()
@@ -273,9 +325,10 @@ class Simulation:
         forces = s.cloth.per_cloth_sum(tri_f)
         rec.add("aero_force", forces)
         rec.add("cloth_position", self.state.positions.copy())
-        div_rms, div_max = metrics.divergence_figures(
-            u, self.wind.solid_mask(), s.grid.h, s.scene.reference_speed
-        )
+        div = self.wind.divergence()
+        if div is None:
+            div = metrics.central_divergence_field(u, self.wind.solid_mask(), s.grid.h)
+        div_rms, div_max = metrics.divergence_figures(div, s.grid.h, s.scene.reference_speed)
         rec.add("divergence_rms", div_rms)
         rec.add("divergence_max", div_max)
         probe_wind = {k: self.wind.sample(p) for k, p in s.probe_points.items()}
@@ -333,14 +386,15 @@ def run(cfg: DictConfig, out_dir: Path) -> RunResult:
     """
     setup = prepare(cfg)
     path = Path(out_dir) / cfg.output.filename
-    sim = Simulation(setup)
+    recorder = Recorder(setup)
     try:
-        sim.run(progress=bool(cfg.sim.progress))
+        Simulation(setup, recorder).run(progress=bool(cfg.sim.progress))
     except Exception as err:  # noqa: BLE001 - recorded, then reported by the caller
         reason = str(err) if isinstance(err, SimulationDiverged) else f"{type(err).__name__}: {err}"
-        write_atomic(sim.recorder.dataset("failed", reason), path)
+        log.error("run failed: %s", reason)
+        write_atomic(recorder.dataset("failed", reason), path)
         return RunResult(path, "failed", reason)
-    write_atomic(sim.recorder.dataset("complete"), path)
+    write_atomic(recorder.dataset("complete"), path)
     return RunResult(path, "complete")
 
 

@@ -46,6 +46,11 @@ class WindField(ABC):
     """Base class of the wind backends (see module docstring)."""
 
     name: ClassVar[str] = ""
+    max_cfl: ClassVar[float] = float("inf")  # above it the run warns (see simulate.prepare)
+
+    @classmethod
+    def check(cls, scene, grid: Grid, params: Any) -> None:
+        """Raise ConfigError for bad ``wind.*`` values before any work (default: none)."""
 
     def __init__(self, scene, grid: Grid, params: Any):
         self.scene = scene
@@ -68,6 +73,14 @@ class WindField(ABC):
     def stats(self) -> dict[str, float]:
         """Backend figures of the last step (e.g. pressure iterations)."""
         return {}
+
+    def divergence(self) -> np.ndarray | None:
+        """The backend's own discrete div u per cell (NaN outside the air), or None.
+
+        None (the default) lets the loop take central differences of ``velocity()``;
+        a solver on a staggered grid returns the divergence its projection controls.
+        """
+        return None
 
     def solid_mask(self) -> np.ndarray:
         """Cells whose centre lies inside a rigid body."""

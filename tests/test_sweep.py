@@ -1,0 +1,168 @@
+"""Sweeps that survive faults: launchers, failure isolation, resume, atomic writes,
+validation before work, reproducibility."""
+
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+import yaml
+
+from windbench.cli import compose_config
+from windbench.errors import ConfigError
+from windbench.simulate import prepare
+
+SWEEP = ["scene=empty", "grid.resolution=8", "sim.duration=0.05", "sim.fail_at_step=97,98,99,2"]
+
+
+def statuses(sweep_dir):
+    out = {}
+    for f in sorted(sweep_dir.glob("*/run_status.yaml")):
+        out[f.parent.name] = yaml.safe_load(f.read_text())["status"]
+    return out
+
+
+def test_submitit_sweep_isolates_a_diverging_run_and_resume_reruns_only_it(cli, tmp_path):
+    sweep = tmp_path / "sweep"
+    proc = cli("-m", "hydra/launcher=submitit_local", *SWEEP, f"hydra.sweep.dir={sweep}")
+    assert proc.returncode == 0, proc.stderr
+    assert "windbench sweep: 3 complete, 1 failed, 0 invalid, 0 skipped" in proc.stdout
+    assert statuses(sweep) == {"0": "complete", "1": "complete", "2": "complete", "3": "failed"}
+    with xr.open_dataset(sweep / "3" / "windbench.nc") as ds:
+        assert ds.attrs["status"] == "failed"
+        assert (
+            ds.attrs["failure"]
+            == "diverged at step 2: fault injected by sim.fail_at_step (testing)"
+        )
+        assert ds.sizes["time"] == 1  # what it recorded before the blow-up
+    mtimes = {n: (sweep / n / "windbench.nc").stat().st_mtime_ns for n in "012"}
+
+    proc = cli(
+        "-m", "hydra/launcher=submitit_local", *SWEEP, f"hydra.sweep.dir={sweep}", "resume=true"
+    )
+    assert "windbench sweep: 0 complete, 1 failed, 0 invalid, 3 skipped" in proc.stdout
+    assert {n: (sweep / n / "windbench.nc").stat().st_mtime_ns for n in "012"} == mtimes
+
+
+def test_joblib_launcher_runs_the_sweep_in_parallel(cli, tmp_path):
+    sweep = tmp_path / "sweep"
+    proc = cli(
+        "-m",
+        "hydra/launcher=joblib",
+        "hydra.launcher.n_jobs=2",
+        "scene=empty,fence",
+        "grid.resolution=16",
+        "sim.duration=0.05",
+        f"hydra.sweep.dir={sweep}",
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "2 complete, 0 failed" in proc.stdout
+    assert len(list(sweep.glob("*/windbench.nc"))) == 2
+
+
+def test_resume_does_not_skip_a_run_whose_config_changed(cli, tmp_path):
+    out = tmp_path / "run"
+    assert (
+        cli(
+            "scene=empty", "grid.resolution=8", "sim.duration=0.05", f"hydra.run.dir={out}"
+        ).returncode
+        == 0
+    )
+    proc = cli(
+        "scene=empty",
+        "grid.resolution=8",
+        "sim.duration=0.1",
+        "resume=true",
+        f"hydra.run.dir={out}",
+    )
+    assert proc.returncode == 0 and "skipped" not in proc.stderr
+    assert yaml.safe_load((out / "run_status.yaml").read_text())["status"] == "complete"
+    with xr.open_dataset(out / "windbench.nc") as ds:
+        assert ds.sizes["time"] == 6
+
+
+KILLER = textwrap.dedent("""
+    import sys, numpy as np, xarray as xr
+    from pathlib import Path
+    from windbench.dataset import write_atomic
+    path = Path(sys.argv[1])
+    for i in range(1000):
+        big = np.full((40, 64, 64, 64), float(i))
+        write_atomic(xr.Dataset({"v": (("a", "b", "c", "d"), big)}, attrs={"status": "complete",
+                     "i": i}), path)
+        print(i, flush=True)
+""")
+
+
+@pytest.mark.parametrize("delay", [0.3, 0.9, 1.7])
+def test_sigkill_during_a_write_leaves_no_corrupt_dataset(tmp_path, delay):
+    path = tmp_path / "windbench.nc"
+    proc = subprocess.Popen([sys.executable, "-c", KILLER, str(path)], stdout=subprocess.PIPE)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    if path.exists():  # whole, or not there at all
+        with xr.open_dataset(path) as ds:
+            assert ds.attrs["status"] == "complete"
+            assert float(ds.v[0, 0, 0, 0]) == ds.attrs["i"] == float(ds.v[-1, -1, -1, -1])
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (["grid.resolution=4000"], r"grid.resolution: 4000 gives .* cells needing about .* GiB"),
+        (["sim.dt=5", "sim.duration=10"], r"sim.dt: 5.0 s lets the wind .* cross the whole domain"),
+        (
+            ["scene=fence", "scene.bodies.0.min=[9,0,0]", "scene.bodies.0.max=[10,4,2]"],
+            r"scene.bodies\[0\]: body lies entirely outside the domain",
+        ),
+        (["sim.duration=-1"], "sim.duration: must be at least sim.dt"),
+    ],
+)
+def test_validation_refuses_before_work(overrides, message):
+    with pytest.raises(ConfigError, match=message):
+        prepare(compose_config(["scene=flag", *overrides]))
+
+
+def test_cfl_is_reported_in_the_dataset(run_config):
+    _, ds = run_config(["scene=empty", "grid.resolution=8", "sim.duration=0.05"])
+    assert ds.attrs["cfl"] == pytest.approx(6.0 * (1 / 60) / 0.5)
+
+
+def test_wrong_type_fails_at_composition(cli):
+    proc = cli("grid.resolution=fine")
+    assert proc.returncode != 0 and "grid.resolution" in proc.stderr
+
+
+TIMING = ("step_seconds",)
+
+
+def assert_same_numbers(a: xr.Dataset, b: xr.Dataset):
+    for name in a.data_vars:
+        if name in TIMING or "per_second" in name or name.endswith("_seconds"):
+            continue
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    assert a.attrs.keys() == b.attrs.keys()
+    for key in a.attrs:
+        np.testing.assert_array_equal(a.attrs[key], b.attrs[key], err_msg=key)
+
+
+@pytest.mark.parametrize("scene", ["two_flags_wall"])
+def test_same_config_and_seed_reproduce_every_number(run_config, scene):
+    from windbench.wind import BACKENDS
+
+    for backend in BACKENDS:
+        args = [
+            f"wind={backend}",
+            f"scene={scene}",
+            "grid.resolution=16",
+            "sim.duration=0.1",
+            "seed=3",
+        ]
+        _, a = run_config(args, name=f"{backend}_a")
+        _, b = run_config(args, name=f"{backend}_b")
+        assert_same_numbers(a, b)

@@ -1,0 +1,1 @@
+"""Comparison reports: run and sweep folders -> combined dataset -> figures -> report."""
