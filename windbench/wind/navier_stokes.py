@@ -235,6 +235,11 @@ class NavierStokesWind(WindField):
 
     name = "navier_stokes"
 
+    @classmethod
+    def check(cls, scene, grid, params) -> None:
+        """ConfigError for bad ``wind.*`` values (called by simulate.prepare)."""
+        _check(params)
+
     def __init__(self, scene, grid, params):
         _check(params)
         super().__init__(scene, grid, params)
