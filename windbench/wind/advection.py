@@ -84,6 +84,20 @@ def velocity_at(u, v, w, origins, h, px, py, pz):
     )
 
 
+@njit(cache=True, inline="always")
+def at_face(q, b, a, I, J, K):
+    """Velocity component b (padded array q) at the centre of face (I, J, K) of component a:
+    the stored value when b == a, else the mean of the four b-faces around that point."""
+    if b == a:
+        return q[I, J, K]
+    # along a the point lies between cells I-1 and I; along b between faces J and J+1
+    Im, Jm, Km = I - int(a == 0), J - int(a == 1), K - int(a == 2)
+    Ib, Jb, Kb = int(b == 0), int(b == 1), int(b == 2)
+    return 0.25 * (
+        q[I, J, K] + q[I + Ib, J + Jb, K + Kb] + q[Im, Jm, Km] + q[Im + Ib, Jm + Jb, Km + Kb]
+    )
+
+
 @njit(cache=True, parallel=True)
 def advect(q, a, u, v, w, origins, lower, extent, periodic, h, dt, out, qmin, qmax, bounds):
     """out = q(x_back) at every interior face of component a (RK2 backtrace over dt).
@@ -99,7 +113,10 @@ def advect(q, a, u, v, w, origins, lower, extent, periodic, h, dt, out, qmin, qm
             py = oy + h * J
             for K in range(1, P2 - 1):
                 pz = oz + h * K
-                ux, uy, uz = velocity_at(u, v, w, origins, h, px, py, pz)
+                # the velocity at the face itself: no interpolation needed
+                ux = at_face(u, 0, a, I, J, K)
+                uy = at_face(v, 1, a, I, J, K)
+                uz = at_face(w, 2, a, I, J, K)
                 mx = _keep_inside(px - 0.5 * dt * ux, lower[0], extent[0], periodic[0])
                 my = _keep_inside(py - 0.5 * dt * uy, lower[1], extent[1], periodic[1])
                 mz = _keep_inside(pz - 0.5 * dt * uz, lower[2], extent[2], periodic[2])

@@ -20,6 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from windbench.geometry.raster import segment_triangle
+from windbench.wind.advection import at_face
 
 
 @njit(cache=True)
@@ -60,22 +61,6 @@ def cell_normals(positions, velocities, triangles, start, items, index, normals,
             velocity[m] = vsum / asum
         else:
             velocity[m] = 0.0
-
-
-@njit(cache=True, inline="always")
-def _other(q, b, a, I, J, K):
-    """Component b (array q) at the position of face (I, J, K) of component a: mean of 4."""
-    di = np.zeros(3, dtype=np.int64)
-    dj = np.zeros(3, dtype=np.int64)
-    di[a] = -1  # component a's face sits between cells I-1 and I along a
-    dj[b] = 1  # component b's faces J and J+1 along b bracket the cell
-    # faces of b around the point: cells (I, J, K) and the one before along a, faces lo/hi
-    return 0.25 * (
-        q[I, J, K]
-        + q[I + dj[0], J + dj[1], K + dj[2]]
-        + q[I + di[0], J + di[1], K + di[2]]
-        + q[I + di[0] + dj[0], J + di[1] + dj[1], K + di[2] + dj[2]]
-    )
 
 
 @njit(cache=True)
@@ -119,11 +104,9 @@ def remove_normal_component(q, a, u, v, w, index, normals, velocity, out):
                 n /= norm
                 vc /= cnt
                 air = np.zeros(3)
-                air[a] = q[I, J, K]
-                for b in range(3):
-                    if b != a:
-                        arr = u if b == 0 else (v if b == 1 else w)
-                        air[b] = _other(arr, b, a, I, J, K)
+                air[0] = at_face(u, 0, a, I, J, K)
+                air[1] = at_face(v, 1, a, I, J, K)
+                air[2] = at_face(w, 2, a, I, J, K)
                 rel = (air[0] - vc[0]) * n[0] + (air[1] - vc[1]) * n[1] + (air[2] - vc[2]) * n[2]
                 out[I, J, K] = q[I, J, K] - rel * n[a]  # u <- u - ((u - v) . n) n
 

@@ -39,6 +39,18 @@ Initial condition: the superposed field of all sources at the faces, zero on fac
 touching a body, then projected (divergence-free from the first step; a scene without
 sources starts at rest).
 
+Defaults (``conf/wind/navier_stokes.yaml``): ``advection=semi_lagrangian`` (the paper's
+scheme, cheapest; ``maccormack`` is 3-30x less dissipative, see
+``experiments/validation_ns/README.md``), ``coupling=paper`` (§4.1.2 as written; cheap,
+but air still crosses a flag through the pressure solve — ``projection`` closes it).
+
+Figures per step (``stats()``): ``pressure_iterations``, ``pressure_residual`` (relative),
+``pressure_rhs_norm`` (||h div u*||_2 before the projection, m/s), ``mac_divergence_max``/
+``_rms`` (|div u| h / U_ref of the MAC divergence on air cells, which is what the
+projection zeroes; :meth:`divergence` gives the field to the loop), ``diffusion_sweeps``,
+``cfl``, ``cloth_cells`` (cells marked by cloth) and the phases ``couple``, ``advect``,
+``diffuse``, ``project`` (``*_seconds``).
+
 Rigid bodies: cells whose centre is inside a body (base-class ``solid_mask()``; thin
 ``resolve=False`` poles mostly miss every centre) are solid: every face touching one has
 zero velocity, so nothing flows through a body and no velocity is ever assigned inside
