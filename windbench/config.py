@@ -106,8 +106,32 @@ class AeroConfig:
 
 
 @dataclass
+class ClothMaterialConfig:
+    """Default cloth material (SI); a cloth's own ``material`` dict overrides any key.
+
+    Defaults: a light woven flag fabric (Kawabata-range figures): 0.15 kg/m^2, tensile
+    stiffness 5000 N/m, shear 50 N/m, bending 1e-5 N m, Rayleigh damping time 1 ms.
+    """
+
+    density: float = 0.15  # kg/m^2, mass per area
+    stretch_stiffness: float = 5000.0  # N/m, membrane (tensile) stiffness Y
+    shear_stiffness: float = 50.0  # N/m, in-plane shear stiffness G
+    bend_stiffness: float = 1e-5  # N m, bending stiffness B
+    damping: float = 1e-3  # s, stiffness-proportional damping time
+
+
+@dataclass
 class ClothConfig:
-    solver: str = "static"  # see windbench.cloth.SOLVERS
+    """Cloth solver settings; see windbench.cloth.solver for the XPBD scheme."""
+
+    solver: str = "xpbd"  # see windbench.cloth.SOLVERS (xpbd | static)
+    substeps: int = 8  # XPBD substeps per sim.dt
+    edge_iterations: int = 4  # Gauss-Seidel passes over the stretch/shear edges per substep
+    gravity: float = 9.81  # m/s^2, along -z
+    collision_margin: float = 0.005  # m, cloth keeps this distance from bodies
+    friction: float = 0.3  # Coulomb coefficient cloth/body
+    energy_limit: float = 10.0  # diverged: kinetic energy > limit x work done on the cloth
+    material: ClothMaterialConfig = field(default_factory=ClothMaterialConfig)
 
 
 @dataclass

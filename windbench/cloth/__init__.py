@@ -12,6 +12,7 @@ from windbench.errors import ConfigError
 
 SOLVERS: dict[str, str] = {
     "static": "windbench.cloth.model:StaticCloth",
+    "xpbd": "windbench.cloth.solver:XPBDCloth",
 }
 
 

@@ -1,4 +1,4 @@
-"""Cloth meshes: the rectangular flag of the paper's Figs. 3-5.
+"""Cloth meshes: the rectangular flag of the paper's Figs. 3-5 and the shirt of Fig. 6.
 
 A mesh is the model part of a cloth (rest geometry, triangles, pinned vertices); the
 solver's state (positions, velocities) lives elsewhere.
@@ -114,7 +114,112 @@ def flag_mesh(spec: Mapping, key: str) -> ClothMesh:
     )
 
 
-MESH_BUILDERS = {"flag": flag_mesh}
+def tube_lattice(a, b, radius: float, n_around: int, n_along: int):
+    """Vertices and triangles of an open cylindrical tube of cloth from ring ``a`` to ring ``b``.
+
+    Vertex ``i * n_along + j`` sits at angle ``2 pi i / n_around`` around the axis and at
+    ``j / (n_along - 1)`` of the way from a to b; the lattice wraps around (the seam joins
+    column n_around - 1 to column 0) with the alternating diagonals of
+    :func:`rectangle_triangles`, so ``n_around`` must be even. Angle 0 points along +x
+    projected off the axis (along +y for an axis near x).
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    axis = (b - a) / np.linalg.norm(b - a)
+    ref = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = ref - np.dot(ref, axis) * axis
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    phi = 2 * np.pi * np.arange(n_around) / n_around
+    t = np.linspace(0.0, 1.0, n_along)
+    ring = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2  # (n_around, 3)
+    verts = a + t[None, :, None] * (b - a) + radius * ring[:, None, :]
+    flat = rectangle_triangles(n_around + 1, n_along)
+    flat = np.where(flat >= n_around * n_along, flat - n_around * n_along, flat)  # wrap the seam
+    return verts.reshape(-1, 3), flat
+
+
+SHIRT_KEYS = {
+    "name",
+    "type",
+    "collar",
+    "radius",
+    "length",
+    "resolution",
+    "shoulder_width",
+    "sleeve_radius",
+    "sleeve_length",
+    "sleeve_angle",
+    "pin",
+    "material",
+}
+
+
+def shirt_mesh(spec: Mapping, key: str) -> ClothMesh:
+    """The shirt of Fig. 6: a torso tube and two sleeve tubes, hung from the shoulders.
+
+    ``collar`` is the centre of the shoulder line (top of the torso tube, metres); the torso
+    tube of ``radius`` hangs ``length`` down along -z with ``resolution`` [around, along]
+    vertices (around even). Each sleeve is a tube of ``sleeve_radius`` and ``sleeve_length``
+    starting at ``collar +- (0, shoulder_width / 2, 0)`` and pointing down and outwards
+    (+-y), ``sleeve_angle`` degrees from the vertical; its lattice spacing follows the
+    torso's. The three tubes are separate pieces of cloth in one mesh (a simplification:
+    no shoulder seams); ``pin: collar`` holds their top rings (shoulders and armholes),
+    ``pin: none`` lets the shirt rest on the body alone. The character faces -x, into a
+    wind along +x.
+    """
+    unknown = set(spec) - SHIRT_KEYS
+    if unknown:
+        raise ConfigError(key, f"unknown key(s) {sorted(unknown)}; allowed {sorted(SHIRT_KEYS)}")
+    collar = _vec(spec, "collar", key)
+    scalars = {}
+    for name in ("radius", "length", "shoulder_width", "sleeve_radius", "sleeve_length"):
+        if name not in spec:
+            raise ConfigError(f"{key}.{name}", "is required: a length in metres")
+        scalars[name] = float(spec[name])
+        if not (np.isfinite(scalars[name]) and scalars[name] > 0):
+            raise ConfigError(f"{key}.{name}", f"must be > 0 metres, got {spec[name]}")
+    angle = float(spec.get("sleeve_angle", 20.0))
+    if not 0.0 <= angle < 90.0:
+        raise ConfigError(f"{key}.sleeve_angle", f"must lie in [0, 90) degrees, got {angle}")
+    n_around, n_along = (int(v) for v in _vec(spec, "resolution", key, 2))
+    if n_around < 4 or n_around % 2 or n_along < 2:
+        raise ConfigError(
+            f"{key}.resolution",
+            f"needs an even number >= 4 around and >= 2 along, got {[n_around, n_along]}",
+        )
+    r, length = scalars["radius"], scalars["length"]
+    step_along = length / (n_along - 1)
+    step_around = 2 * np.pi * r / n_around
+    pieces = [tube_lattice(collar, collar - [0.0, 0.0, length], r, n_around, n_along)]
+    rs, ls = scalars["sleeve_radius"], scalars["sleeve_length"]
+    s_around = max(4, 2 * int(round(np.pi * rs / step_around)))
+    s_along = max(2, int(round(ls / step_along)) + 1)
+    a = np.radians(angle)
+    for side in (-1.0, 1.0):
+        top = collar + [0.0, side * scalars["shoulder_width"] / 2, 0.0]
+        end = top + ls * np.array([0.0, side * np.sin(a), -np.cos(a)])
+        pieces.append(tube_lattice(top, end, rs, s_around, s_along))
+    verts, tris, pins, offset = [], [], [], 0
+    for (v, t), (na, nl) in zip(
+        pieces, [(n_around, n_along), (s_around, s_along), (s_around, s_along)], strict=True
+    ):
+        verts.append(v)
+        tris.append(t + offset)
+        pins.append(offset + np.arange(na) * nl)  # the top ring (j = 0) of each tube
+        offset += v.shape[0]
+    pin = spec.get("pin", "collar")
+    if pin not in ("collar", "none"):
+        raise ConfigError(f"{key}.pin", f"must be 'collar' or 'none', got {pin!r}")
+    return ClothMesh(
+        name=str(spec.get("name", "shirt")),
+        vertices=np.concatenate(verts),
+        triangles=np.concatenate(tris).astype(np.int64),
+        pinned=np.concatenate(pins).astype(np.int64) if pin == "collar" else np.zeros(0, np.int64),
+        material=dict(spec.get("material", {}) or {}),
+    )
+
+
+MESH_BUILDERS = {"flag": flag_mesh, "shirt": shirt_mesh}
 
 
 def mesh_from_config(spec: Mapping, key: str) -> ClothMesh:

@@ -79,7 +79,8 @@ class ClothState:
 class StaticCloth:
     """Cloth held in its rest shape: forces are computed on it but it does not move.
 
-    The stand-in until a real solver is configured (``cloth.solver=static``).
+    ``cloth.solver=static``: for runs that want the wind alone with a fixed cloth obstacle
+    (the default solver is ``xpbd``, :mod:`windbench.cloth.solver`).
     """
 
     def __init__(self, model: ClothModel, bodies, params):

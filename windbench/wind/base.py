@@ -51,6 +51,7 @@ class WindField(ABC):
     @classmethod
     def check(cls, scene, grid: Grid, params: Any) -> None:
         """Raise ConfigError for bad ``wind.*`` values before any work (default: none)."""
+        return None
 
     def __init__(self, scene, grid: Grid, params: Any):
         self.scene = scene

@@ -1,0 +1,128 @@
+"""Speed of the coupled cloth step: frames per second of the flag scene at three resolutions.
+
+Targets (issue 5), per 1/60 s frame including wind sampling, aerodynamics (paper §3) and
+body collisions: a 40 x 25 flag >= 300 frames/s, a 64 x 64 cloth >= 60, a 100 x 60 flag
+>= 30. Each case runs the real loop (``windbench.simulate.Simulation``, ``wind=global``,
+``scene=flag`` with ``scene.cloths.0.resolution=[nu,nv]``) for a few warm-up frames
+(numba compiles, cached) and then ``--frames`` timed frames; the figures are the median
+and the best of the loop's own ``step_seconds`` phases (wind, aero, cloth, total).
+
+    PYTHONPATH=$PWD python experiments/bench_cloth.py [--frames 120] [--substeps 16]
+
+writes ``experiments/results/bench_cloth.csv`` (one row per case).
+
+The machine is shared: besides wall time (the loop's ``step_seconds``) each frame's CPU
+time of this process is recorded (``time.process_time``), which is what the frame costs
+on an idle core; the 1-minute load average is written beside them. numba runs with one
+thread unless NUMBA_NUM_THREADS is set (threads that wait for a busy core cost far more
+than they gain on two shared cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # before numba is imported
+import platform
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from windbench.cli import compose_config
+from windbench.simulate import Simulation, prepare
+
+CASES = (
+    ("flag_40x25", (40, 25), 300.0),
+    ("cloth_64x64", (64, 64), 60.0),
+    ("flag_100x60", (100, 60), 30.0),
+)
+OUT = Path(__file__).resolve().parent / "results" / "bench_cloth.csv"
+
+
+def bench_case(resolution, frames: int, warmup: int, extra: list[str]) -> dict:
+    nu, nv = resolution
+    duration = (frames + warmup) / 60.0
+    cfg = compose_config(
+        [
+            "scene=flag",
+            "wind=global",
+            f"scene.cloths.0.resolution=[{nu},{nv}]",
+            f"sim.duration={duration}",
+            "sim.progress=false",
+            *extra,
+        ]
+    )
+    sim = Simulation(prepare(cfg))
+    for n in range(warmup):
+        sim.step(n)
+    wall0 = time.perf_counter()
+    cpu = []
+    for n in range(warmup, warmup + frames):
+        c0 = time.process_time()
+        sim.step(n)
+        cpu.append(time.process_time() - c0)
+    wall = (time.perf_counter() - wall0) / frames
+    sec = np.asarray(sim.recorder.rows["step_seconds"][warmup:])  # wind, aero, cloth, total
+    med = np.median(sec, axis=0)
+    stats = sim.cloth_solver.stats(sim.state)
+    return {
+        "vertices": nu * nv,
+        "substeps": int(cfg.cloth.substeps),
+        "frames": frames,
+        "ms_wind": 1e3 * med[0],
+        "ms_aero": 1e3 * med[1],
+        "ms_cloth": 1e3 * med[2],
+        "ms_total_median": 1e3 * med[3],
+        "ms_total_best": 1e3 * sec[:, 3].min(),
+        "ms_loop_wall": 1e3 * wall,
+        "fps_median": 1.0 / med[3],
+        "ms_cpu_median": 1e3 * float(np.median(cpu)),
+        "fps_cpu": 1.0 / float(np.median(cpu)),
+        "max_stretch": stats["max_stretch"],
+        "max_penetration": stats["max_penetration"],
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=120)
+    parser.add_argument("--warmup", type=int, default=30)
+    parser.add_argument("--substeps", type=int, default=None)
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args()
+    extra = [] if args.substeps is None else [f"cloth.substeps={args.substeps}"]
+    rows = []
+    for name, res, target in CASES:
+        row = {"case": name, "nu": res[0], "nv": res[1], "target_fps": target}
+        row.update(bench_case(res, args.frames, args.warmup, extra))
+        row["meets_target_wall"] = bool(row["fps_median"] >= target)
+        row["meets_target_cpu"] = bool(row["fps_cpu"] >= target)
+        row["numba_threads"] = os.environ["NUMBA_NUM_THREADS"]
+        row["load_average_1min"] = os.getloadavg()[0]
+        row["cpus"] = os.cpu_count()
+        row["machine"] = platform.processor() or platform.machine()
+        row["date"] = datetime.now(UTC).isoformat(timespec="seconds")
+        rows.append(row)
+        print(
+            f"{name:12s} {row['fps_median']:7.1f} frames/s wall, {row['fps_cpu']:7.1f} by CPU "
+            f"time (target {target:g}); "
+            f"cloth {row['ms_cloth']:.2f} ms, aero {row['ms_aero']:.2f} ms, "
+            f"wind {row['ms_wind']:.2f} ms; max stretch {row['max_stretch']:.3f}"
+        )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    with open(args.out, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        for row in rows:
+            writer.writerow(
+                {k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()}
+            )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

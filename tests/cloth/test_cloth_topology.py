@@ -1,0 +1,129 @@
+"""Constraint topology and the continuum-to-discrete stiffness mapping (windbench.cloth.topology).
+
+The energies are checked against the continuum membrane and plate energies of a uniform
+deformation, known in closed form: uniaxial strain (Y eps^2 / 2 per area), simple shear
+(G gamma^2 / 2) and cylindrical bending (B kappa^2 / 2).
+"""
+
+import numpy as np
+import pytest
+
+from windbench.cloth.mesh import flag_mesh, shirt_mesh
+from windbench.cloth.model import ClothModel
+from windbench.cloth.solver import XPBDCloth
+from windbench.cloth.topology import build_topology, dihedral_angles, tethers, triangle_areas
+from windbench.config import ClothConfig
+
+W, H, NU, NV = 1.2, 0.8, 7, 5
+
+
+def _flag(pin="pole"):
+    spec = {"origin": [0, 0, 0], "size": [W, H], "resolution": [NU, NV], "pin": pin}
+    spec.update(u_axis=[1, 0, 0], v_axis=[0, 1, 0])
+    return flag_mesh(spec, "c")
+
+
+def _solver(mesh, **material):
+    cfg = ClothConfig()
+    for k, v in material.items():
+        setattr(cfg.material, k, v)
+    return XPBDCloth(ClothModel.from_meshes([mesh]), (), cfg)
+
+
+def test_lattice_counts_and_areas():
+    mesh = _flag()
+    t = build_topology(mesh.vertices, mesh.triangles)
+    n_edges = NU * (NV - 1) + NV * (NU - 1) + (NU - 1) * (NV - 1)
+    assert len(t.edges) == n_edges
+    assert t.edge_shear.sum() == (NU - 1) * (NV - 1)  # one diagonal per cell
+    boundary = 2 * (NU - 1) + 2 * (NV - 1)
+    assert len(t.hinges) == n_edges - boundary
+    assert t.vertex_area.sum() == pytest.approx(W * H)
+    assert t.edge_area.sum() == pytest.approx(3 * W * H)  # each triangle counted per edge
+    np.testing.assert_allclose(t.hinge_angle, 0.0, atol=1e-12)  # flat rest shape
+
+
+def test_dihedral_angle_of_a_fold():
+    # two unit right triangles sharing the edge x0-x1 on the y axis, folded by 60 degrees
+    fold = np.radians(60.0)
+    x = np.array([[0, 0, 0], [0, 1, 0], [-1, 0, 0], [np.cos(fold), 0, np.sin(fold)]], float)
+    angle = dihedral_angles(x, np.array([[0, 1, 2, 3]]))[0]
+    assert abs(angle) == pytest.approx(fold)  # 0 when flat
+
+
+def _spring_energy(solver, x, shear: bool) -> float:
+    """Sum of k dL^2 / 2 over the shear (or the stretch) edges at positions x."""
+    t = solver.topology
+    sel = t.edge_shear if shear else ~t.edge_shear
+    d = t.edges[sel]
+    dl = np.linalg.norm(x[d[:, 0]] - x[d[:, 1]], axis=1) - t.edge_length[sel]
+    return 0.5 * np.sum(dl**2 / solver.edge_compliance[sel])
+
+
+def test_uniaxial_stretch_energy_matches_membrane_stiffness():
+    mesh = _flag()
+    y_mod, eps = 3000.0, 1e-4
+    x = mesh.vertices * [1 + eps, 1, 1]
+    energy = _spring_energy(_solver(mesh, stretch_stiffness=y_mod), x, shear=False)
+    assert energy == pytest.approx(0.5 * y_mod * eps**2 * W * H, rel=1e-3)
+
+
+def test_simple_shear_energy_matches_shear_stiffness():
+    mesh = _flag()
+    g_mod, gamma = 40.0, 1e-5
+    x = mesh.vertices + np.outer(mesh.vertices[:, 1] * gamma, [1, 0, 0])
+    energy = _spring_energy(_solver(mesh, shear_stiffness=g_mod), x, shear=True)
+    assert energy == pytest.approx(0.5 * g_mod * gamma**2 * W * H, rel=1e-3)
+
+
+def test_cylindrical_bending_energy_matches_bending_stiffness():
+    mesh = _flag()
+    b_mod = 2e-4
+    s = _solver(mesh, bend_stiffness=b_mod)
+    kappa = 0.5  # 1/m: the flag rolled around a cylinder of radius 2 m along its u axis
+    u, v = mesh.vertices[:, 0], mesh.vertices[:, 1]
+    x = np.stack([np.sin(kappa * u) / kappa, v, (1 - np.cos(kappa * u)) / kappa], axis=1)
+    theta = dihedral_angles(x, s.topology.hinges)
+    energy = 0.5 * np.sum(theta**2 / s.hinge_compliance)
+    hu = W / (NU - 1)
+    # only the hinges on the NU - 2 interior v-lines bend, each carrying a cell column
+    assert energy == pytest.approx(0.5 * b_mod * kappa**2 * (W - hu) * H, rel=1e-9)
+
+
+def test_tethers_of_a_flag_run_straight_to_the_pole():
+    mesh = _flag(pin="pole")
+    t = build_topology(mesh.vertices, mesh.triangles)
+    anchor, length, path = tethers(mesh.vertices, t.edges, mesh.pinned)
+    assert np.all(anchor[mesh.pinned] == -1)
+    free = np.setdiff1d(np.arange(NU * NV), mesh.pinned)
+    np.testing.assert_allclose(length[free], mesh.vertices[free, 0])  # distance to the pole
+    np.testing.assert_allclose(mesh.vertices[anchor[free], 1], mesh.vertices[free, 1])
+    np.testing.assert_allclose(path[free], length[free])  # lattice rows are straight paths
+
+
+def test_shirt_tubes_are_closed_and_hang_from_their_top_rings():
+    spec = dict(
+        collar=[0, 0, 1.5],
+        radius=0.2,
+        length=0.5,
+        resolution=[24, 11],
+        shoulder_width=0.6,
+        sleeve_radius=0.08,
+        sleeve_length=0.2,
+        sleeve_angle=20.0,
+    )
+    mesh = shirt_mesh(spec, "c")
+    t = build_topology(mesh.vertices, mesh.triangles)
+    # closed tubes: the lateral area is 2 pi r l (up to the polygon's chord factor)
+    torso = 24 * 11
+    area_torso = triangle_areas(mesh.vertices, mesh.triangles[: 2 * 24 * 10]).sum()
+    chord = 24 * np.sin(np.pi / 24) / np.pi
+    assert area_torso == pytest.approx(2 * np.pi * 0.2 * 0.5 * chord, rel=1e-9)
+    # every interior hinge of a tube bends by the polygon's outer angle 2 pi / n_around
+    ring = np.abs(t.hinge_angle[(t.hinges < torso).all(axis=1)])
+    assert np.isclose(ring, 0.0).any() and np.isclose(ring.max(), 2 * np.pi / 24)
+    assert np.allclose(mesh.vertices[mesh.pinned[:24], 2], 1.5)  # torso collar ring
+    sleeve_pins = mesh.vertices[mesh.pinned[24:]]  # the armholes: rings of radius 0.08
+    centre = np.where(sleeve_pins[:, 1:2] > 0, [0, 0.3, 1.5], [0, -0.3, 1.5])
+    np.testing.assert_allclose(np.linalg.norm(sleeve_pins - centre, axis=1), 0.08)
+    assert len(sleeve_pins) == 2 * 10  # 2 round(pi r_s / (2 pi r / 24)) = 10 around each

@@ -1,0 +1,153 @@
+"""Constraint topology of a triangle mesh: edges, hinges, rest lengths and angles, masses.
+
+Pure numpy, computed once per model (the immutable part of the cloth solver):
+
+- every mesh edge is a distance constraint. An edge is a *shear* edge when it is the longest
+  edge of every triangle it bounds (the diagonal of a lattice cell, see
+  :func:`windbench.cloth.mesh.rectangle_triangles`); the others are *stretch* edges (the
+  warp and weft threads of the lattice);
+- every interior edge (two triangles) is a *hinge*: a dihedral-angle bending constraint on
+  its four vertices ``(edge0, edge1, opposite in triangle A, opposite in triangle B)``;
+- a vertex carries a third of the mass of each triangle it belongs to (lumped mass).
+
+Stiffnesses map the continuum constants (SI) to the discrete constraints so that on a
+rectangular lattice with cells ``hu x hv`` the discrete energy equals the continuum one:
+
+- stretch, membrane stiffness ``Y`` (N/m): uniaxial strain eps stores ``Y eps^2 / 2`` per
+  unit area, so a lattice edge of length L bounding triangles of total area ``A_e`` is a
+  spring of stiffness ``k = Y A_e / L^2`` (N/m);
+- shear, in-plane shear stiffness ``G`` (N/m): simple shear gamma stores ``G gamma^2 / 2``
+  per area and changes a cell diagonal by ``gamma hu hv / L``, so ``k = G L^2 / A_e``;
+- bending, bending stiffness ``B`` (N m): curvature kappa stores ``B kappa^2 / 2`` per
+  area; across a hinge of length L the dihedral angle is ``kappa A_e / L``, so the
+  hinge energy is ``k_b theta^2 / 2`` with ``k_b = B L^2 / A_e`` (N m / rad^2), the
+  discrete-shells weight of Grinspun et al. (2003).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Topology:
+    """Edges and hinges of a mesh with their rest measures (global vertex ids)."""
+
+    edges: np.ndarray  # (E, 2)
+    edge_length: np.ndarray  # (E,) rest length, m
+    edge_area: np.ndarray  # (E,) total rest area of the triangles sharing the edge, m^2
+    edge_shear: np.ndarray  # (E,) bool: diagonal (shear) edge
+    edge_triangle: np.ndarray  # (E,) one triangle of the edge (for per-cloth material)
+    hinges: np.ndarray  # (H, 4) edge0, edge1, opposite A, opposite B
+    hinge_angle: np.ndarray  # (H,) rest dihedral angle, rad
+    hinge_length: np.ndarray  # (H,)
+    hinge_area: np.ndarray  # (H,)
+    hinge_triangle: np.ndarray  # (H,)
+    vertex_area: np.ndarray  # (n,) a third of the area of the triangles around each vertex
+
+
+def triangle_areas(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area of each triangle: |(x1 - x0) x (x2 - x0)| / 2."""
+    x0, x1, x2 = (positions[triangles[:, k]] for k in range(3))
+    return 0.5 * np.linalg.norm(np.cross(x1 - x0, x2 - x0), axis=1)
+
+
+def dihedral_angles(positions: np.ndarray, hinges: np.ndarray) -> np.ndarray:
+    """Signed dihedral angle of each hinge, the same convention as the solver's kernel.
+
+    With edge e = x1 - x0, normals nA = (x2 - x0) x e... written out as in
+    :func:`windbench.cloth.solver.hinge_angle_gradient`: theta = atan2((nA x nB) . e^, nA . nB).
+    """
+    x0, x1, x2, x3 = (positions[hinges[:, k]] for k in range(4))
+    e = x1 - x0
+    na = np.cross(x2 - x0, x2 - x1)
+    nb = np.cross(x3 - x1, x3 - x0)
+    el = np.linalg.norm(e, axis=1, keepdims=True)
+    sin = np.einsum("ij,ij->i", np.cross(na, nb), e / np.where(el > 0, el, 1.0))
+    cos = np.einsum("ij,ij->i", na, nb)
+    return np.arctan2(sin, cos)
+
+
+def build_topology(rest: np.ndarray, triangles: np.ndarray) -> Topology:
+    """Edges, hinges and lumped vertex areas of a (possibly multi-component) mesh."""
+    n = rest.shape[0]
+    m = triangles.shape[0]
+    areas = triangle_areas(rest, triangles)
+    vertex_area = np.zeros(n)
+    for k in range(3):
+        np.add.at(vertex_area, triangles[:, k], areas / 3.0)
+    # half-edges: (a, b) of triangle t with opposite vertex c, keyed by the sorted pair
+    a = triangles[:, [0, 1, 2]].reshape(-1)
+    b = triangles[:, [1, 2, 0]].reshape(-1)
+    c = triangles[:, [2, 0, 1]].reshape(-1)
+    tri = np.repeat(np.arange(m), 3)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo.astype(np.int64) * max(n, 1) + hi
+    order = np.argsort(key, kind="stable")
+    key_s = key[order]
+    uniq, first, counts = np.unique(key_s, return_index=True, return_counts=True)
+    if counts.size and counts.max() > 2:
+        raise ValueError("non-manifold mesh: an edge is shared by more than two triangles")
+    e_lo, e_hi = lo[order][first], hi[order][first]
+    edges = np.stack([e_lo, e_hi], axis=1).astype(np.int64)
+    length = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
+    edge_area = np.zeros(len(uniq))
+    np.add.at(edge_area, np.repeat(np.arange(len(uniq)), counts), areas[tri[order]])
+    # shear edge: the longest edge of every triangle it bounds
+    side = np.linalg.norm(rest[b] - rest[a], axis=1).reshape(m, 3)
+    longest = (side >= side.max(axis=1, keepdims=True) * (1 - 1e-9)) & (
+        side > np.sort(side, axis=1)[:, [1]] * (1 + 1e-6)
+    )
+    is_long = longest.reshape(-1)[order]
+    shear = np.logical_and.reduceat(is_long, first) if len(first) else np.zeros(0, bool)
+    # hinges: edges with two triangles
+    two = np.flatnonzero(counts == 2)
+    h0 = order[first[two]]
+    h1 = order[first[two] + 1]
+    hinges = np.stack([a[h0], b[h0], c[h0], c[h1]], axis=1).astype(np.int64)
+    return Topology(
+        edges=edges,
+        edge_length=length,
+        edge_area=edge_area,
+        edge_shear=shear.astype(bool),
+        edge_triangle=tri[order][first],
+        hinges=hinges,
+        hinge_angle=dihedral_angles(rest, hinges),
+        hinge_length=length[two],
+        hinge_area=edge_area[two],
+        hinge_triangle=tri[h0],
+        vertex_area=vertex_area,
+    )
+
+
+def tethers(
+    rest: np.ndarray, edges: np.ndarray, pinned: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Long-range attachments (Kim, Chentanez, Mueller 2012): each vertex's nearest pin.
+
+    The pin nearest along the mesh (shortest edge path) is the anchor; the tether length is
+    the straight rest distance to it, the length of the cloth between them when the mesh is
+    flat (a flag) or the path runs along a ruling line (the collar-to-hem lines of a tube).
+    Returns (anchor ``(n,)``, -1 where a vertex cannot reach a pin or is pinned, length ``(n,)``,
+    path ``(n,)`` the edge-path distance to the anchor, inf where there is none).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    n = rest.shape[0]
+    anchor = np.full(n, -1, dtype=np.int64)
+    length = np.zeros(n)
+    if pinned.size == 0 or edges.size == 0:
+        return anchor, length, np.full(n, np.inf)
+    w = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
+    graph = coo_matrix((w, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+    dist, _, source = dijkstra(
+        graph, directed=False, indices=np.unique(pinned), min_only=True, return_predecessors=True
+    )
+    ok = np.isfinite(dist) & (source >= 0)
+    ok[pinned] = False
+    anchor[ok] = source[ok]
+    length[ok] = np.linalg.norm(rest[ok] - rest[source[ok]], axis=1)
+    return anchor, length, dist
