@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+SERIAL_CELLS = 32768  # levels with fewer cells are smoothed on one thread
 PRE_SWEEPS = 3  # per level and direction: 7 iterations to 1e-6 at 32..128 (fence)
 
 
@@ -131,6 +132,25 @@ def gauss_seidel(x, b, wx, wy, wz, periodic, colour):
         _gs_plane(x, b, wx, wy, wz, periodic, i, colour)
     for i in range(last, nx):
         _gs_plane(x, b, wx, wy, wz, periodic, i, colour)
+
+
+@njit(cache=True)
+def gauss_seidel_serial(x, b, wx, wy, wz, periodic, colour):
+    """:func:`gauss_seidel` on one thread (small levels: no thread start-up per sweep).
+    Cells of one colour do not neighbour each other, so the result is the same bits."""
+    for i in range(x.shape[0]):
+        _gs_plane(x, b, wx, wy, wz, periodic, i, colour)
+
+
+@njit(cache=True)
+def residual_serial(x, b, wx, wy, wz, periodic, out):
+    """:func:`residual` on one thread (small levels)."""
+    nx, ny, nz = x.shape
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
+                out[i, j, k] = b[i, j, k] - (d * x[i, j, k] - s)
 
 
 @njit(cache=True)
@@ -237,6 +257,10 @@ class _Level:
         self.b = np.zeros(self.shape) if work else None
         self.r = np.zeros(self.shape)
         self.ratio = np.ones(3, dtype=np.int64)  # to the next coarser level
+        # small levels run on one thread: a parallel launch costs more than the work there
+        small = np.prod(self.shape) < SERIAL_CELLS
+        self.gauss_seidel = gauss_seidel_serial if small else gauss_seidel
+        self.residual = residual_serial if small else residual
 
     def args(self):
         return (self.w[0], self.w[1], self.w[2], self.periodic)
@@ -244,7 +268,7 @@ class _Level:
     def smooth(self, x, b, sweeps, reverse):
         for _ in range(sweeps):
             for colour in (1, 0) if reverse else (0, 1):
-                gauss_seidel(x, b, *self.args(), colour)
+                self.gauss_seidel(x, b, *self.args(), colour)
 
 
 class MultigridPoisson:
@@ -309,7 +333,7 @@ class MultigridPoisson:
         z[...] = 0.0
         for lev, nxt in zip(levels[:-1], levels[1:], strict=True):
             lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
-            residual(lev.x, lev.b, *lev.args(), lev.r)
+            lev.residual(lev.x, lev.b, *lev.args(), lev.r)
             restrict_mean(lev.r, lev.ratio, nxt.b)
             nxt.x[...] = 0.0
         last = levels[-1]
