@@ -68,6 +68,13 @@ def plane_points(lower, upper, h: float, shape, a: int, face: int) -> np.ndarray
     return pts
 
 
+@njit(cache=True, inline="always")
+def cells_beside(I, J, K, a):
+    """Unpadded indices (i+, j+, k+, i-, j-, k-) of the cells on the + and - side of the
+    padded face (I, J, K) of component a (they may lie outside the grid)."""
+    return I - 1, J - 1, K - 1, I - 1 - int(a == 0), J - 1 - int(a == 1), K - 1 - int(a == 2)
+
+
 @njit(cache=True)
 def _get(q, b, L, c1, c2):
     if b == 0:

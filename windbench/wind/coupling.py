@@ -21,6 +21,7 @@ from numba import njit, prange
 
 from windbench.geometry.raster import segment_triangle
 from windbench.wind.advection import at_face
+from windbench.wind.boundaries import cells_beside
 
 
 @njit(cache=True)
@@ -76,14 +77,7 @@ def remove_normal_component(q, a, u, v, w, index, normals, velocity, out):
         for J in range(1, P1 - 1):
             for K in range(1, P2 - 1):
                 out[I, J, K] = q[I, J, K]
-                ip, jp, kp = I - 1, J - 1, K - 1
-                im, jm, km = ip, jp, kp
-                if a == 0:
-                    im -= 1
-                elif a == 1:
-                    jm -= 1
-                else:
-                    km -= 1
+                ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
                 n = np.zeros(3)
                 vc = np.zeros(3)
                 cnt = 0

@@ -74,6 +74,7 @@ from windbench.wind.boundaries import (
     OPENING,
     OUTFLOW,
     PERIODIC,
+    cells_beside,
     component_origin,
     padded_shape,
 )
@@ -123,14 +124,7 @@ def subtract_gradient(q, a, psi, free, periodic):
             for K in range(1, P2 - 1):
                 if not free[I, J, K]:
                     continue
-                ip, jp, kp = I - 1, J - 1, K - 1
-                im, jm, km = ip, jp, kp
-                if a == 0:
-                    im -= 1
-                elif a == 1:
-                    jm -= 1
-                else:
-                    km -= 1
+                ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
                 plus = 0.0
                 minus = 0.0
                 if (ip, jp, kp)[a] < n[a]:
