@@ -33,7 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 RHO_AIR = 1.2  # kg/m^3
 
@@ -77,14 +77,14 @@ def triangle_force(x0, x1, x2, v_rel, c_d, c_l, rho, out):
     out[2] = -c_d * q * vz + c_l * q * uz
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def triangle_forces(positions, velocities, wind, triangles, c_d, c_l, rho, out):
     """out[t] = aerodynamic force on triangle t; wind and velocities given per vertex.
 
     The triangle's velocity and wind are the means over its three vertices (the paper
     records the wind at the vertices, §4.1.2).
     """
-    for t in prange(triangles.shape[0]):
+    for t in range(triangles.shape[0]):
         a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
         v_rel = np.empty(3)
         for k in range(3):

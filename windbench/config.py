@@ -84,6 +84,21 @@ class NavierStokesWindConfig(WindConfig):
 
 
 @dataclass
+class ParticleWindConfig(WindConfig):
+    """Backend ``particles`` (paper §4.2.2); see windbench.wind.particles and .emission."""
+
+    name: str = "particles"
+    particles_per_second: float | None = None  # per source; null: particles_per_cell rule
+    particles_per_cell: float = 2.0  # automatic rate: new particles per emitter cell per memory
+    max_particles: int = 1_000_000  # cap on live particles (all sources)
+    max_age: float = 10.0  # s; older particles die
+    memory: float = 0.1  # s; a cell keeps a source's wind this long after its last particle
+    max_hits: int = 8  # collisions per particle per step before it waits for the next step
+    deflected_cells: str = "bodies"  # which hits make later marks w - (n.w) n: all|bodies|none
+    seed: int = 0  # conf/wind/particles.yaml sets ${seed}
+
+
+@dataclass
 class GridConfig:
     resolution: int = 32  # cells along the longest domain axis
 
@@ -158,6 +173,7 @@ class WindbenchConfig:
 WIND_SCHEMAS: dict[str, type] = {
     "global": GlobalWindConfig,
     "navier_stokes": NavierStokesWindConfig,
+    "particles": ParticleWindConfig,
 }
 
 

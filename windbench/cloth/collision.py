@@ -15,7 +15,7 @@ pushed out of a body never gains energy from it beyond the small correction of t
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from windbench.geometry.bodies import union_distance_point
 
@@ -51,10 +51,10 @@ def project_vertex(kinds, params, margin, friction, x_prev, p, normal):
         p[2] -= s * tz
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def penetration_depths(kinds, params, positions, out):
     """out[i] = max(0, -sdf(x_i)): how deep vertex i lies inside the union of the bodies."""
-    for i in prange(positions.shape[0]):
+    for i in range(positions.shape[0]):
         normal = np.empty(3)
         d = union_distance_point(
             kinds, params, positions[i, 0], positions[i, 1], positions[i, 2], normal

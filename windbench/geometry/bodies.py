@@ -26,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from windbench.errors import ConfigError
 
@@ -228,10 +228,10 @@ def union_distance_point(kinds, params, px, py, pz, normal):
     return best
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def union_distance(kinds, params, points, dist, normal):
     """dist[p], normal[p] = signed distance to the union of bodies at points[p]."""
-    for p in prange(points.shape[0]):
+    for p in range(points.shape[0]):
         dist[p] = union_distance_point(
             kinds, params, points[p, 0], points[p, 1], points[p, 2], normal[p]
         )

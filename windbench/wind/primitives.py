@@ -33,7 +33,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from windbench.errors import ConfigError
 
@@ -189,10 +189,10 @@ def primitive_velocity(kind, prm, px, py, pz, out):
         out[2] = s * (ax * dy - ay * dx)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def superposed_velocity(kinds, params, points, out):
     """out[p] = sum_i w_i(points[p]) (paper §4.2.1, w = sum w_i)."""
-    for p in prange(points.shape[0]):
+    for p in range(points.shape[0]):
         w = np.empty(3)
         acc0 = 0.0
         acc1 = 0.0

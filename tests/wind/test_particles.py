@@ -1,0 +1,374 @@
+"""Backend ``particles`` (paper §4.2.2) on whole scenes: per-source wind on each side of a
+wall, the lee of a fence, closed bodies never entered, a cloth's shadow, agreement with
+the ``global`` backend where no object interferes, gusts and memory, determinism; and
+the emission model (regions, counts, gust schedule, bad input)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from windbench.cli import compose_config
+from windbench.cloth.mesh import rectangle_triangles
+from windbench.errors import ConfigError
+from windbench.geometry.bodies import distances
+from windbench.grid import Grid
+from windbench.scenes import build_scene
+from windbench.wind.base import Obstacles
+from windbench.wind.emission import GustSchedule, emitters_from_scene
+from windbench.wind.global_field import GlobalWind
+from windbench.wind.particles import ParticleWind
+from windbench.wind.primitives import superpose
+
+DT = 1.0 / 60.0
+FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
+
+
+def params(*overrides):
+    return compose_config(["wind=particles", *overrides]).wind
+
+
+def scene_of(sources, bodies=(), domain=((0, 0, 0), (4, 2, 2))):
+    return build_scene(
+        {
+            "name": "t",
+            "domain": {"min": list(domain[0]), "max": list(domain[1])},
+            "boundary": dict.fromkeys(FACES, "slip"),
+            "sources": list(sources),
+            "bodies": list(bodies),
+        }
+    )
+
+
+def assert_all(field, vector, **tol):
+    """Every vector of ``field`` (..., 3) equals ``vector``."""
+    field = np.asarray(field)
+    assert field.size > 0
+    np.testing.assert_allclose(field, np.broadcast_to(vector, field.shape), **tol)
+
+
+def advance(wind, seconds, obstacles=None, each=None):
+    obstacles = obstacles or Obstacles.rigid_only(wind.scene.bodies)
+    for _ in range(int(round(seconds / DT))):
+        wind.step(DT, obstacles)
+        if each:
+            each(wind)
+    return wind
+
+
+# ---------------------------------------------------------------- the paper's scenes
+
+
+def test_opposing_sources_each_side_has_its_own_source(run_config):
+    """§4.2.2's thought experiment: superposed tagging gives 0, per-source particles do not."""
+    _, ds = run_config(
+        ["scene=opposing_sources", "wind=particles", "grid.resolution=32", "sim.duration=1.2"]
+    )
+    u = ds["wind"].isel(snapshot=-1).values
+    x = ds["x"].values
+    left, right = x < 3.45, x > 4.55  # one cell clear of the wall [3.7, 4.3]
+    assert_all(u[left], [4.0, 0.0, 0.0])  # blows away from x_min's source
+    assert_all(u[right], [-4.0, 0.0, 0.0])  # away from x_max's source
+    scene = build_scene(compose_config(["scene=opposing_sources"]).scene)
+    centres = Grid.from_domain(scene.lower, scene.upper, 32).cell_centres()
+    np.testing.assert_allclose(superpose(scene.sources, centres[left]), 0.0, atol=1e-12)
+    np.testing.assert_allclose(superpose(scene.sources, centres[right]), 0.0, atol=1e-12)
+
+
+def test_fence_lee_and_free_stream(run_config):
+    _, ds = run_config(["scene=fence", "wind=particles", "grid.resolution=32", "sim.duration=1.5"])
+    assert ds.attrs["status"] == "complete"
+    assert float(ds["lee_speed_ratio"].isel(time=-1)) < 0.05
+    free = ds["probe_wind"].isel(snapshot=-1).sel(probe_point=ds.probe_box == "free_stream")
+    assert np.linalg.norm(free.values, axis=1).mean() >= 0.95 * 6.0
+    assert {"live_particles", "particle_steps_per_second", "cell_crossings"} <= set(ds)
+    assert "trace" in ds["phase"].values
+
+
+BODIES = [
+    {"type": "box", "min": [1.6, 0.55, 0.45], "max": [2.45, 1.4, 1.35]},
+    {"type": "capsule", "a": [3.0, 0.5, 0.7], "b": [3.0, 1.5, 1.3], "radius": 0.3},
+    {"type": "cylinder", "a": [0.8, 1.0, 0.3], "b": [1.1, 1.0, 1.7], "radius": 0.25},
+]
+
+
+@pytest.mark.parametrize("body", BODIES, ids=lambda b: b["type"])
+def test_closed_body_is_never_entered(body):
+    """Oblique wind and a vortex around the body: particles hit and slide, never get in."""
+    scene = scene_of(
+        [
+            {"type": "uniform", "velocity": [5.0, 1.0, -0.7]},
+            {"type": "vortex", "center": [2.0, 1.0, 1.0], "axis": [0.2, 0.1, 1.0], "strength": 4.0},
+        ],
+        [body],
+    )
+    grid = Grid.from_domain(scene.lower, scene.upper, 32)
+    wind = ParticleWind(scene, grid, params())
+    lo = np.asarray(grid.lower)
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    idx = np.indices(grid.shape).reshape(3, -1).T
+    d_corners = np.stack(
+        [distances(scene.bodies, lo + grid.h * (idx + c))[0] for c in corners], axis=1
+    )
+    deep = (d_corners < 0).all(axis=1).reshape(grid.shape)  # cells wholly inside (convex)
+    touching = ((d_corners < 0).any(axis=1) & ~(d_corners < 0).all(axis=1)).reshape(grid.shape)
+    assert deep.sum() >= 8
+
+    def outside(w):
+        pos = w.particles[0]
+        assert (distances(scene.bodies, pos)[0] >= 0.0).all()
+
+    advance(wind, 1.0, each=outside)
+    assert not wind.ever_reached()[deep].any()
+    assert wind.ever_reached()[touching].mean() > 0.5  # the flow did come up to the surface
+
+
+def test_static_cloth_sheet_shadows_the_cells_behind_it():
+    scene = scene_of([{"type": "uniform", "velocity": [6.0, 0.0, 0.0]}])
+    grid = Grid.from_domain(scene.lower, scene.upper, 32)  # h = 0.125
+    nu = nv = 13
+    s = np.linspace(0.4, 1.6, nu)
+    yy, zz = np.meshgrid(s, s, indexing="ij")
+    verts = np.stack([np.full(nu * nv, 2.03), yy.ravel(), zz.ravel()], axis=1)
+    cloth = Obstacles((), verts, np.zeros_like(verts), rectangle_triangles(nu, nv))
+    wind = advance(ParticleWind(scene, grid, params()), 1.0, cloth)
+    u = wind.velocity()
+    x, y, z = grid.axes()
+    shade = (y > 0.5)[:, None] & (y < 1.5)[:, None] & ((z > 0.5) & (z < 1.5))[None, :]
+    behind = u[x > 2.2][:, shade]
+    assert np.all(behind == 0.0)
+    assert not wind.reached()[0][x > 2.2][:, shade].any()
+    assert_all(u[x < 1.9][:, shade], [6.0, 0.0, 0.0])  # in front
+    beside = ((y < 0.3)[:, None] | (y > 1.7)[:, None]) & np.ones_like(z, bool)[None, :]
+    assert_all(u[x > 2.2][:, beside], [6.0, 0.0, 0.0])
+
+
+def test_without_obstacles_the_field_is_the_global_one_where_particles_arrived():
+    dense = {"emit": {"rate": 20000.0}}
+    scene = scene_of(
+        [
+            {"type": "uniform", "velocity": [3.0, 0.5, 0.0]},
+            {
+                "type": "vortex",
+                "center": [2.0, 1.0, 0],
+                "strength": 8.0,
+                "core_radius": 0.2,
+                **dense,
+            },
+            {
+                "type": "source",
+                "center": [1.0, 1.0, 1.0],
+                "strength": 10.0,
+                "core_radius": 0.2,
+                **dense,
+            },
+        ]
+    )
+    grid = Grid.from_domain(scene.lower, scene.upper, 16)
+    wind = advance(ParticleWind(scene, grid, params("wind.memory=0.5")), 1.5)
+    all_sources = wind.reached().all(axis=0)
+    assert all_sources.mean() > 0.5
+    expected = GlobalWind(scene, grid, compose_config(["wind=global"]).wind).velocity()
+    np.testing.assert_allclose(
+        wind.velocity()[all_sources], expected[all_sources], rtol=1e-12, atol=1e-12
+    )
+    # elsewhere: the sum over the sources that did arrive, zero where none did
+    none = ~wind.reached().any(axis=0)
+    assert np.all(wind.velocity()[none] == 0.0)
+
+
+def test_a_gust_passes_and_memory_forgets_it():
+    """On for 0.3 s: the windy band runs downstream at U; cells are calm memory after it."""
+    U, memory = 6.0, 0.1
+    scene = scene_of(
+        [{"type": "uniform", "velocity": [U, 0.0, 0.0], "gusts": {"on": 0.3, "off": 100.0}}]
+    )
+    grid = Grid.from_domain(scene.lower, scene.upper, 32)
+    wind = advance(ParticleWind(scene, grid, params(f"wind.memory={memory}")), 0.5)
+    t = wind.time
+    windy = np.linalg.norm(wind.velocity(), axis=-1).mean(axis=(1, 2)) > 0
+    x = grid.axes()[0]
+    # a cell at x is reached during [x/U, 0.3 + x/U] (+ one cell and one step of slack)
+    tail = U * (t - 0.3 - memory)
+    head = U * t
+    assert not windy[x < tail - grid.h - U * DT].any()
+    assert windy[(x > tail + grid.h + U * DT) & (x < head - grid.h - U * DT)].all()
+    assert not windy[x > head + grid.h].any()
+
+
+def test_same_seed_same_field_other_seed_other_particles():
+    scene = build_scene(compose_config(["scene=fence"]).scene)
+    grid = Grid.from_domain(scene.lower, scene.upper, 16)
+    runs = [advance(ParticleWind(scene, grid, params(f"seed={s}")), 0.5) for s in (7, 7, 8)]
+    np.testing.assert_array_equal(runs[0].velocity(), runs[1].velocity())
+    np.testing.assert_array_equal(runs[0].particles[0], runs[1].particles[0])
+    assert not np.array_equal(runs[0].particles[0], runs[2].particles[0])
+
+
+# ---------------------------------------------------------------- emission
+
+
+def test_uniform_source_emits_on_its_inflow_faces_by_flux():
+    scene = scene_of([{"type": "uniform", "velocity": [3.0, -4.0, 0.0], "emit": {"rate": 6000.0}}])
+    grid = Grid.from_domain(scene.lower, scene.upper, 16)
+    (e,) = emitters_from_scene(scene, grid, params(), seed=0)
+    pos, instants, carry, counter = e.emit(0.0, 1.0, 0.0, 0)
+    assert counter == 6000 and len(pos) == 6000
+    on_x = np.isclose(pos[:, 0], 0.0)
+    on_y = np.isclose(pos[:, 1], 2.0, atol=1e-6)
+    assert np.all(on_x ^ on_y)
+    # flux through x_min: 3 * (2 * 2); through y_max: 4 * (4 * 2)
+    assert on_x.mean() == pytest.approx(12.0 / 44.0, abs=0.005)
+    assert np.all((instants >= 0.0) & (instants <= 1.0))
+
+
+def test_emission_counts_are_exact_over_many_steps_and_respect_gusts():
+    scene = scene_of(
+        [
+            {
+                "type": "uniform",
+                "velocity": [1.0, 0, 0],
+                "emit": {"rate": 123.4},
+                "gusts": {"on": 0.25, "off": 0.5, "start": 0.1},
+            }
+        ]
+    )
+    grid = Grid.from_domain(scene.lower, scene.upper, 8)
+    (e,) = emitters_from_scene(scene, grid, params(), seed=0)
+    carry, counter, instants = 0.0, 0, []
+    for n in range(180):
+        _, t_e, carry, counter = e.emit(n * DT, (n + 1) * DT, carry, counter)
+        instants.append(t_e)
+    t_e = np.concatenate(instants)
+    # 3 s: on during [0.1, 0.35), [0.85, 1.1), [1.6, 1.85), [2.35, 2.6) -> 1.0 s in all
+    assert counter == int(np.floor(123.4 * 1.0 + 1e-9))
+    phase = np.mod(t_e - 0.1, 0.75)
+    assert np.all((t_e >= 0.1) & (phase <= 0.25 + 1e-12))
+
+
+def test_gust_schedule_inverse():
+    g = GustSchedule(on=0.3, off=0.7, start=0.2)
+    t = np.array([0.2, 0.35, 0.5, 1.2, 1.45])
+    f = np.array([g.on_time(v) for v in t])
+    np.testing.assert_allclose(f, [0.0, 0.15, 0.3, 0.3, 0.55])
+    np.testing.assert_allclose(g.instant(np.array([0.15, 0.45])), [0.35, 1.35])
+
+
+def test_point_source_and_vortex_regions():
+    scene = scene_of(
+        [
+            {
+                "type": "source",
+                "center": [2.0, 1.0, 1.0],
+                "strength": 1.0,
+                "emit": {"radius": 0.4, "rate": 500},
+            },
+            {
+                "type": "vortex",
+                "center": [2.0, 1.0, 1.0],
+                "axis": [0, 0, 1],
+                "strength": 1.0,
+                "emit": {"radius": 0.5, "rate": 500},
+            },
+            {
+                "type": "uniform",
+                "velocity": [1.0, 0, 0],
+                "emit": {"rate": 500, "box": {"min": [1, 1, 0.5], "max": [1, 1.5, 1.0]}},
+            },
+        ]
+    )
+    grid = Grid.from_domain(scene.lower, scene.upper, 16)
+    src, vor, box = (
+        e.emit(0.0, 1.0, 0.0, 0)[0] for e in emitters_from_scene(scene, grid, params(), 0)
+    )
+    np.testing.assert_allclose(np.linalg.norm(src - [2, 1, 1], axis=1), 0.4)
+    np.testing.assert_allclose(src.mean(axis=0), [2, 1, 1], atol=0.02)  # even on the sphere
+    radial = np.linalg.norm(vor[:, :2] - [2, 1], axis=1)
+    assert radial.max() <= 0.5 and (vor[:, 2].min(), vor[:, 2].max()) == pytest.approx(
+        (0, 2), abs=0.02
+    )
+    assert np.mean(radial < 0.5 / np.sqrt(2)) == pytest.approx(0.5, abs=0.03)  # uniform in area
+    assert np.all(box[:, 0] == 1.0) and box[:, 1:].min() >= 0.5 and box[:, 1].max() <= 1.5
+
+
+def test_auto_rate_keeps_every_inflow_cell_marked():
+    """particles_per_cell new particles per memory on each inflow cell: no cell left unmarked."""
+    scene = scene_of([{"type": "uniform", "velocity": [6.0, 0.0, 0.0]}])
+    grid = Grid.from_domain(scene.lower, scene.upper, 32)
+    wind = advance(ParticleWind(scene, grid, params()), 1.0)
+    assert wind.reached()[0].all()
+
+
+@pytest.mark.parametrize(
+    ("source_extra", "key"),
+    [
+        ({"emit": {"rate": -1.0}}, "scene.sources[0].emit.rate"),
+        ({"emit": {"speed": 1.0}}, "scene.sources[0].emit"),
+        ({"emit": {"radius": 1.0}}, "scene.sources[0].emit.radius"),
+        ({"gusts": {"on": 1.0}}, "scene.sources[0].gusts"),
+        ({"gusts": {"on": 0.0, "off": 1.0}}, "scene.sources[0].gusts.on"),
+        ({"emit": {"box": {"min": [1, 1, 1], "max": [0, 2, 2]}}}, "scene.sources[0].emit.box.max"),
+    ],
+)
+def test_bad_emission_settings_name_the_key(source_extra, key):
+    scene = scene_of([{"type": "uniform", "velocity": [1.0, 0, 0], **source_extra}])
+    grid = Grid.from_domain(scene.lower, scene.upper, 8)
+    with pytest.raises(ConfigError) as err:
+        ParticleWind(scene, grid, params())
+    assert err.value.key == key
+
+
+@pytest.mark.parametrize(
+    "override",
+    [
+        "wind.memory=0",
+        "wind.max_particles=0",
+        "wind.max_age=-1",
+        "wind.max_hits=0",
+        "wind.deflected_cells=some",
+    ],
+)
+def test_bad_wind_settings_name_the_key(override):
+    scene = scene_of([{"type": "uniform", "velocity": [1.0, 0, 0]}])
+    grid = Grid.from_domain(scene.lower, scene.upper, 8)
+    for build in (ParticleWind.check, ParticleWind):  # check: what prepare() can call
+        with pytest.raises(ConfigError) as err:
+            build(scene, grid, params(override))
+        assert err.value.key == override.split("=")[0]
+
+
+def test_particle_count_stays_bounded():
+    scene = scene_of(
+        [
+            {
+                "type": "vortex",
+                "center": [2.0, 1.0, 1.0],
+                "axis": [0, 0, 1],
+                "strength": 1.0,
+                "emit": {"rate": 20000},
+            }
+        ]
+    )
+    grid = Grid.from_domain(scene.lower, scene.upper, 16)
+    counts = []
+    advance(
+        ParticleWind(scene, grid, params("wind.max_particles=3000", "wind.max_age=0.2")),
+        0.6,
+        each=lambda w: counts.append(w.stats()["live_particles"]),
+    )
+    assert max(counts) <= 3000
+    assert counts[-1] == pytest.approx(counts[-2], rel=0.1)  # steady: emission = deaths by age
+
+
+@pytest.mark.parametrize(
+    ("override", "key"),
+    [
+        ("wind.memory=0", "wind.memory"),
+        ("scene.sources.0.velocity=[0.0,0.0,0.0]", "scene.sources[0].velocity"),
+    ],
+)
+def test_a_run_with_bad_settings_stops_before_any_output(run_config, override, key, tmp_path):
+    with pytest.raises(ConfigError) as err:
+        run_config(["scene=fence", "wind=particles", override])
+    assert err.value.key == key
+    assert not any(tmp_path.rglob("*.nc"))

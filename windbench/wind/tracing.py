@@ -1,0 +1,438 @@
+"""Gust-particle tracing kernels (paper §4.2.2): Euler paths cut at cell faces, lee by
+collision, and the cell field u = sum of the reached sources' w_i.
+
+A particle of source i moves only in w_i (never the superposed field) by the paper's
+explicit Euler step ``p_{t+dt} = p_t + w_i(p_t) dt``. Its path is walked cell by cell
+(Amanatides & Woo's voxel traversal), so each piece lies inside one cell ("subdivided
+into parts not exceeding the size of a grid cell") and no cell on the way is skipped.
+
+Each piece is tested only against what is registered in its cell: the rigid bodies whose
+surface may reach into the cell (:func:`register_bodies`) and the cloth triangles that
+overlap it (:func:`windbench.geometry.raster.register_triangles`), so the cost is
+O(particles x cells crossed), not O(particles x triangles). At the first hit the particle
+stops on the surface (``delta`` outside it) and its velocity loses the normal component,
+``w <- w - (n . w) n``; it spends the rest of the step sliding along the object. A head-on
+hit (nothing left of w) ends the particle: its gust has stagnated at the wall.
+
+Rigid bodies are convex (box, capsule, cylinder, plane), so their signed distance d is a
+convex function along a piece; :func:`convex_first_hit` finds the first root of d exactly
+(to round-off) without marching, also for thin poles (``resolve: false`` bodies are
+obstacles like any other; their lee is thinner than a cell and mostly invisible on the grid).
+
+Cell state per (cell, source) is one row ``[t, deflected, ux, uy, uz]``: when the source's
+particles last reached the cell, whether that mark was a deflected one, and the value it
+left. Choice (documented in :mod:`windbench.wind.particles`): a free particle leaves w_i
+at the cell centre, so with no obstacles the field equals the ``global`` backend's
+exactly. After a hit, ``mark_mode`` says which contact normals the particle's later marks
+in this step remove from w_i(centre) (the paper's u(p_col) . n_obj = 0): those of every
+hit (``all``), of rigid bodies only (``bodies``) or none. Within one step a deflected mark
+beats a free one (the no-penetration condition wins at the surface); otherwise the later
+mark wins. The kernels run serially over the particles in their stored order, so a run
+is bit-for-bit reproducible.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from windbench.geometry.bodies import body_distance, union_distance_point
+from windbench.geometry.raster import segment_triangle
+from windbench.wind.primitives import primitive_velocity
+
+ROW = 5  # t, deflected, ux, uy, uz
+MARK_NONE, MARK_BODIES, MARK_ALL = 0, 1, 2  # which hits make the marks "deflected"
+MARK_MODES = {"none": MARK_NONE, "bodies": MARK_BODIES, "all": MARK_ALL}
+ROOT_ITERATIONS = 60
+
+
+@njit(cache=True)
+def register_bodies(kinds, params, lower, h, shape):
+    """CSR (start, items) of the bodies whose surface may reach into each cell.
+
+    Body b is registered in cell c when d_b(centre_c) <= half the cell diagonal, i.e. the
+    body meets the ball around the cell (cell id c = (i * ny + j) * nz + k).
+    """
+    nx, ny, nz = shape[0], shape[1], shape[2]
+    n_cells = nx * ny * nz
+    reach = 0.5 * np.sqrt(3.0) * h * (1.0 + 1e-9)
+    normal = np.empty(3)
+    start = np.zeros(n_cells + 1, dtype=np.int64)
+    for fill in range(2):
+        if fill == 1:
+            for c in range(n_cells):
+                start[c + 1] += start[c]
+            items = np.empty(start[n_cells], dtype=np.int64)
+            counts = np.zeros(n_cells, dtype=np.int64)
+        else:
+            items = np.empty(0, dtype=np.int64)
+            counts = np.zeros(0, dtype=np.int64)
+        for i in range(nx):
+            for j in range(ny):
+                for k in range(nz):
+                    c = (i * ny + j) * nz + k
+                    px = lower[0] + (i + 0.5) * h
+                    py = lower[1] + (j + 0.5) * h
+                    pz = lower[2] + (k + 0.5) * h
+                    for b in range(kinds.shape[0]):
+                        if body_distance(kinds[b], params[b], px, py, pz, normal) <= reach:
+                            if fill == 0:
+                                start[c + 1] += 1
+                            else:
+                                items[start[c] + counts[c]] = b
+                                counts[c] += 1
+    return start, items
+
+
+@njit(cache=True)
+def convex_first_hit(kind, prm, ax, ay, az, ex, ey, ez, scratch, normal):
+    """First s in [0, 1] with d(a + s e) <= 0 for one convex body, or -1; outward normal.
+
+    f(s) = d(a + s e) is convex (d of a convex set), with slope f'(s) = n(s) . e. No root
+    when f(1) > 0 and either |e| <= f(0) + f(1) (1-Lipschitz), f'(0) >= 0 or f'(1) <= 0
+    (monotone), or the tangent lines at a bracket of the minimum meet above zero; else the
+    root is bracketed and bisected. A particle touching the surface (f(0) <= 0) hits at
+    s = 0 only if it moves inward. ``scratch`` is a (2, 3) work array.
+    """
+    n0 = scratch[0]
+    nm = scratch[1]
+    length = np.sqrt(ex * ex + ey * ey + ez * ez)
+    f0 = body_distance(kind, prm, ax, ay, az, n0)
+    g0 = n0[0] * ex + n0[1] * ey + n0[2] * ez
+    if f0 <= 0.0:
+        if g0 < -1e-12 * length:
+            normal[0], normal[1], normal[2] = n0[0], n0[1], n0[2]
+            return 0.0
+        return -1.0
+    if length == 0.0:
+        return -1.0
+    f1 = body_distance(kind, prm, ax + ex, ay + ey, az + ez, nm)
+    lo = 0.0
+    hi = 1.0
+    if f1 > 0.0:
+        if f0 + f1 >= length or g0 >= 0.0:
+            return -1.0
+        g1 = nm[0] * ex + nm[1] * ey + nm[2] * ez
+        if g1 <= 0.0:
+            return -1.0
+        flo, glo, fhi, ghi = f0, g0, f1, g1
+        found = False
+        for _ in range(ROOT_ITERATIONS):
+            # convex f lies above both tangents; they meet at ts with value lb
+            ts = (fhi - flo + glo * lo - ghi * hi) / (glo - ghi)
+            if flo + glo * (ts - lo) > 0.0:
+                return -1.0
+            mid = 0.5 * (lo + hi)
+            fm = body_distance(kind, prm, ax + mid * ex, ay + mid * ey, az + mid * ez, nm)
+            if fm <= 0.0:
+                hi = mid
+                found = True
+                break
+            gm = nm[0] * ex + nm[1] * ey + nm[2] * ez
+            if gm < 0.0:
+                lo, flo, glo = mid, fm, gm
+            else:
+                hi, fhi, ghi = mid, fm, gm
+        if not found:
+            return -1.0
+    # f(lo) > 0 >= f(hi): bisect to round-off, keep the outside end
+    for _ in range(ROOT_ITERATIONS):
+        if (hi - lo) * length <= 1e-13 * (1.0 + length):
+            break
+        mid = 0.5 * (lo + hi)
+        if body_distance(kind, prm, ax + mid * ex, ay + mid * ey, az + mid * ez, nm) <= 0.0:
+            hi = mid
+        else:
+            lo = mid
+    body_distance(kind, prm, ax + lo * ex, ay + lo * ey, az + lo * ez, normal)
+    return lo
+
+
+@njit(cache=True, inline="always")
+def _push(touched, n_touched, cell):
+    """Append cell to the touched list (doubling it when full)."""
+    if n_touched == touched.shape[0]:
+        grown = np.empty(2 * touched.shape[0] + 16, dtype=np.int64)
+        grown[:n_touched] = touched[:n_touched]
+        touched = grown
+    touched[n_touched] = cell
+    return touched
+
+
+@njit(cache=True, inline="always")
+def _mark(
+    kind, prm, normals, n_normals, lower, h, shape, idx, s, t_now, reach, wc, touched, n_touched
+):
+    """Mark cell idx = (i, j, k) for source s at t_now with w_i(centre), the first n_normals
+    contact normals removed; a deflected mark (n_normals > 0) beats a free one within a
+    step. A cell's first mark of the step goes on the ``touched`` list (for the assembly);
+    returns (touched, n_touched)."""
+    cell = (idx[0] * shape[1] + idx[1]) * shape[2] + idx[2]
+    first = reach[cell, s, 0] != t_now
+    if not first and n_normals == 0:
+        # marked already this step: a free mark would repeat the same w_i(centre), and a
+        # deflected one beats it
+        return touched, n_touched
+    cx = lower[0] + (idx[0] + 0.5) * h
+    cy = lower[1] + (idx[1] + 0.5) * h
+    cz = lower[2] + (idx[2] + 0.5) * h
+    primitive_velocity(kind, prm, cx, cy, cz, wc)
+    for m in range(n_normals):
+        # w <- w - (n . w) n for each surface hit so far in this step
+        dn = wc[0] * normals[m, 0] + wc[1] * normals[m, 1] + wc[2] * normals[m, 2]
+        wc[0] -= dn * normals[m, 0]
+        wc[1] -= dn * normals[m, 1]
+        wc[2] -= dn * normals[m, 2]
+    reach[cell, s, 0] = t_now
+    reach[cell, s, 1] = 1.0 if n_normals > 0 else 0.0
+    reach[cell, s, 2] = wc[0]
+    reach[cell, s, 3] = wc[1]
+    reach[cell, s, 4] = wc[2]
+    if first:
+        touched = _push(touched, n_touched, cell)
+        n_touched += 1
+    return touched, n_touched
+
+
+@njit(cache=True)
+def trace_gusts(
+    positions,
+    sources,
+    durations,
+    kinds,
+    prims,
+    lower,
+    h,
+    shape,
+    body_kinds,
+    body_params,
+    body_start,
+    body_items,
+    cloth_positions,
+    cloth_triangles,
+    tri_bounds,
+    tri_start,
+    tri_items,
+    t_now,
+    delta,
+    max_hits,
+    mark_mode,
+    reach,
+    touched,
+    positions_out,
+    alive_out,
+):
+    """Advance every particle by its duration in its own w_i (p += w_i(p) tau), mark cells.
+
+    ``tri_bounds`` (m, 2, 3) are the cloth triangles' bounding boxes (min, max): a cheap
+    test before Möller-Trumbore. ``reach`` (n_cells, n_sources, ROW) is updated in place;
+    ``touched`` collects the cells first marked this step (grown when full). Returns
+    (touched, n_touched, crossings).
+    """
+    ny, nz = shape[1], shape[2]
+    n_touched = 0
+    crossings = 0
+    w = np.empty(3)
+    wc = np.empty(3)
+    hit_n = np.empty(3)
+    tmp_n = np.empty(3)
+    scratch = np.empty((2, 3))
+    normals = np.empty((max_hits, 3))
+    a = np.empty(3)
+    b = np.empty(3)
+    p = np.empty(3)  # particle position
+    v = np.empty(3)  # its velocity (w_i, deflected after hits)
+    e = np.empty(3)  # this path: p -> p + e
+    cur = np.empty(3, dtype=np.int64)  # current cell
+    step = np.empty(3, dtype=np.int64)  # +-1 per axis
+    t_next = np.empty(3)  # path parameter of the next cell face per axis
+    t_cell = np.empty(3)  # path parameter per cell width per axis
+    for q in range(positions.shape[0]):
+        s = sources[q]
+        kind = kinds[s]
+        prm = prims[s]
+        for ax in range(3):
+            p[ax] = positions[q, ax]
+        primitive_velocity(kind, prm, p[0], p[1], p[2], w)  # Euler: w_i(p_t)
+        w2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+        v[:] = w
+        remaining = durations[q]
+        n_hits = 0
+        n_marks = 0  # hits whose normal the cell marks remove (see mark_mode)
+        alive = True
+        stagnant = False
+        moving = True
+        while moving:
+            # one straight path p -> p + v * remaining, walked cell by cell (Amanatides-Woo)
+            moving = False
+            for ax in range(3):
+                e[ax] = v[ax] * remaining
+                f = (p[ax] - lower[ax]) / h
+                if not 0.0 <= f < shape[ax]:
+                    alive = False
+                cur[ax] = int(f)
+                step[ax] = 1 if e[ax] > 0 else -1
+                if e[ax] != 0.0:
+                    face = (cur[ax] + (1 if e[ax] > 0 else 0)) * h + lower[ax]
+                    t_next[ax] = (face - p[ax]) / e[ax]
+                    t_cell[ax] = h / abs(e[ax])
+                else:
+                    t_next[ax] = np.inf
+                    t_cell[ax] = np.inf
+            if not alive:
+                break
+            t = 0.0
+            while True:
+                t_exit = max(t, min(t_next[0], t_next[1], t_next[2], 1.0))
+                cell = (cur[0] * ny + cur[1]) * nz + cur[2]
+                # the piece a -> b lies in this cell: test what is registered here
+                for ax in range(3):
+                    a[ax] = p[ax] + t * e[ax]
+                    b[ax] = p[ax] + t_exit * e[ax]
+                best = 2.0
+                body_hit = False
+                for m in range(body_start[cell], body_start[cell + 1]):
+                    bi = body_items[m]
+                    sh = convex_first_hit(
+                        body_kinds[bi],
+                        body_params[bi],
+                        a[0],
+                        a[1],
+                        a[2],
+                        b[0] - a[0],
+                        b[1] - a[1],
+                        b[2] - a[2],
+                        scratch,
+                        tmp_n,
+                    )
+                    if 0.0 <= sh < best:
+                        best = sh
+                        body_hit = True
+                        hit_n[:] = tmp_n
+                for m in range(tri_start[cell], tri_start[cell + 1]):
+                    tri = tri_items[m]
+                    # bounding boxes apart: the piece cannot meet this triangle
+                    apart = False
+                    for ax in range(3):
+                        lo_ab = min(a[ax], b[ax])
+                        hi_ab = max(a[ax], b[ax])
+                        if lo_ab > tri_bounds[tri, 1, ax] or hi_ab < tri_bounds[tri, 0, ax]:
+                            apart = True
+                    if apart:
+                        continue
+                    va = cloth_positions[cloth_triangles[tri, 0]]
+                    vb = cloth_positions[cloth_triangles[tri, 1]]
+                    vc = cloth_positions[cloth_triangles[tri, 2]]
+                    sh = segment_triangle(a, b, va, vb, vc)
+                    if 0.0 <= sh < best:
+                        best = sh
+                        body_hit = False
+                        # the triangle's unit normal, turned to face the particle
+                        tri_n = np.cross(vb - va, vc - va)
+                        tri_n /= np.sqrt((tri_n * tri_n).sum())
+                        if tri_n[0] * e[0] + tri_n[1] * e[1] + tri_n[2] * e[2] > 0.0:
+                            tri_n = -tri_n
+                        hit_n[:] = tri_n
+                if best <= 1.0:
+                    n_hits += 1
+                    if mark_mode == MARK_ALL or (mark_mode == MARK_BODIES and body_hit):
+                        normals[n_marks] = hit_n
+                        n_marks += 1
+                touched, n_touched = _mark(
+                    kind,
+                    prm,
+                    normals,
+                    n_marks,
+                    lower,
+                    h,
+                    shape,
+                    cur,
+                    s,
+                    t_now,
+                    reach,
+                    wc,
+                    touched,
+                    n_touched,
+                )
+                crossings += 1
+                if best <= 1.0:
+                    # stop on the surface, lose the normal component: w - (n . w) n
+                    th = t + best * (t_exit - t)
+                    for ax in range(3):
+                        p[ax] += th * e[ax] + delta * hit_n[ax]
+                    remaining *= 1.0 - th
+                    dn = v[0] * hit_n[0] + v[1] * hit_n[1] + v[2] * hit_n[2]
+                    for ax in range(3):
+                        v[ax] -= dn * hit_n[ax]
+                    if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= 1e-24 * w2:
+                        stagnant = True  # head-on: the gust stagnates at the wall
+                        remaining = 0.0
+                    elif n_hits >= max_hits:
+                        remaining = 0.0
+                    # slide on along the surface; a path of length 0 still marks the cell
+                    # the particle rests in (across the face the hit may have lain on)
+                    moving = True
+                    break
+                if t_exit >= 1.0:
+                    for ax in range(3):
+                        p[ax] += e[ax]
+                    break
+                # into the next cell across the nearest face
+                ax = 0
+                if t_next[1] < t_next[ax]:
+                    ax = 1
+                if t_next[2] < t_next[ax]:
+                    ax = 2
+                cur[ax] += step[ax]
+                t = t_next[ax]
+                t_next[ax] += t_cell[ax]
+                if not 0 <= cur[ax] < shape[ax]:
+                    alive = False
+                    break
+        for ax in range(3):
+            positions_out[q, ax] = p[ax]
+        alive_out[q] = alive and not stagnant
+    return touched, n_touched, crossings
+
+
+@njit(cache=True, inline="always")
+def _reached(t_cell, t_now, memory):
+    """A reach at t_cell counts at t_now while t_now - t_cell <= memory (round-off slack)."""
+    return t_now - t_cell <= memory * (1.0 + 1e-12) + 1e-12
+
+
+@njit(cache=True)
+def assemble_cells(cells, reach, solid, t_now, memory, u):
+    """u[c] = sum over sources reached within memory of their stored value; 0 in solids."""
+    for m in range(cells.shape[0]):
+        c = cells[m]
+        u[c, 0] = 0.0
+        u[c, 1] = 0.0
+        u[c, 2] = 0.0
+        if solid[c]:
+            continue
+        for s in range(reach.shape[1]):
+            if _reached(reach[c, s, 0], t_now, memory):
+                u[c, 0] += reach[c, s, 2]
+                u[c, 1] += reach[c, s, 3]
+                u[c, 2] += reach[c, s, 4]
+
+
+@njit(cache=True)
+def reached_sources(reach, t_now, memory, out):
+    """out[c, s] = whether source s reached cell c within the last ``memory`` seconds."""
+    for c in range(reach.shape[0]):
+        for s in range(reach.shape[1]):
+            out[c, s] = _reached(reach[c, s, 0], t_now, memory)
+
+
+@njit(cache=True)
+def outside_bodies(kinds, params, points, keep):
+    """keep[p] &= points[p] lies outside every body (serial: emission batches are small)."""
+    normal = np.empty(3)
+    for p in range(points.shape[0]):
+        if keep[p]:
+            d = union_distance_point(
+                kinds, params, points[p, 0], points[p, 1], points[p, 2], normal
+            )
+            keep[p] = d >= 0.0
