@@ -69,6 +69,21 @@ class GlobalWindConfig(WindConfig):
 
 
 @dataclass
+class NavierStokesWindConfig(WindConfig):
+    """Stable fluids (paper §4.1); see windbench.wind.navier_stokes."""
+
+    name: str = "navier_stokes"
+    advection: str = "semi_lagrangian"  # semi_lagrangian | maccormack
+    viscosity: float = 1.5e-5  # kinematic, m^2/s (air)
+    pressure_tol: float = 1e-6  # relative residual of the projection
+    pressure_max_iterations: int = 200
+    diffusion_tol: float = 1e-8  # largest Gauss-Seidel update / velocity scale
+    source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
+    coupling: str = "paper"  # none | paper | projection (paper §4.1.2)
+    body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
+
+
+@dataclass
 class ParticleWindConfig(WindConfig):
     """Backend ``particles`` (paper §4.2.2); see windbench.wind.particles and .emission."""
 
@@ -155,7 +170,11 @@ class WindbenchConfig:
     experiment: str | None = None
 
 
-WIND_SCHEMAS: dict[str, type] = {"global": GlobalWindConfig, "particles": ParticleWindConfig}
+WIND_SCHEMAS: dict[str, type] = {
+    "global": GlobalWindConfig,
+    "navier_stokes": NavierStokesWindConfig,
+    "particles": ParticleWindConfig,
+}
 
 
 def register_configs() -> None:

@@ -12,6 +12,7 @@ from windbench.errors import ConfigError
 
 BACKENDS: dict[str, str] = {
     "global": "windbench.wind.global_field:GlobalWind",
+    "navier_stokes": "windbench.wind.navier_stokes:NavierStokesWind",
     "particles": "windbench.wind.particles:ParticleWind",
 }
 
