@@ -14,7 +14,6 @@ import tempfile
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-import numpy as np
 import xarray as xr
 
 import windbench
@@ -103,7 +102,3 @@ def is_complete(path) -> bool:
             return ds.attrs.get("status") == "complete"
     except (OSError, ValueError, KeyError):
         return False
-
-
-def as_float(values) -> np.ndarray:
-    return np.asarray(values, dtype=np.float64)

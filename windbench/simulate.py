@@ -15,7 +15,6 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -396,10 +395,3 @@ def run(cfg: DictConfig, out_dir: Path) -> RunResult:
         return RunResult(path, "failed", reason)
     write_atomic(recorder.dataset("complete"), path)
     return RunResult(path, "complete")
-
-
-def run_config(overrides: dict[str, Any] | None = None) -> Any:
-    """Compose the packaged config with ``key=value`` overrides (for tests and notebooks)."""
-    from windbench.cli import compose_config
-
-    return compose_config([f"{k}={v}" for k, v in (overrides or {}).items()])
