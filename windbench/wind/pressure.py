@@ -87,15 +87,21 @@ def _nb_sum(x, wx, wy, wz, periodic, i, j, k):
     return s, d
 
 
+@njit(cache=True)
+def _residual_plane(x, b, wx, wy, wz, periodic, i, out):
+    """out[i] = (b - A x)[i]: one plane of the residual."""
+    ny, nz = x.shape[1], x.shape[2]
+    for j in range(ny):
+        for k in range(nz):
+            s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
+            out[i, j, k] = b[i, j, k] - (d * x[i, j, k] - s)
+
+
 @njit(cache=True, parallel=True)
 def residual(x, b, wx, wy, wz, periodic, out):
     """out = b - A x."""
-    nx, ny, nz = x.shape
-    for i in prange(nx):
-        for j in range(ny):
-            for k in range(nz):
-                s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
-                out[i, j, k] = b[i, j, k] - (d * x[i, j, k] - s)
+    for i in prange(x.shape[0]):
+        _residual_plane(x, b, wx, wy, wz, periodic, i, out)
 
 
 @njit(cache=True, parallel=True)
@@ -145,12 +151,8 @@ def gauss_seidel_serial(x, b, wx, wy, wz, periodic, colour):
 @njit(cache=True)
 def residual_serial(x, b, wx, wy, wz, periodic, out):
     """:func:`residual` on one thread (small levels)."""
-    nx, ny, nz = x.shape
-    for i in range(nx):
-        for j in range(ny):
-            for k in range(nz):
-                s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
-                out[i, j, k] = b[i, j, k] - (d * x[i, j, k] - s)
+    for i in range(x.shape[0]):
+        _residual_plane(x, b, wx, wy, wz, periodic, i, out)
 
 
 @njit(cache=True)
