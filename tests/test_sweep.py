@@ -128,6 +128,16 @@ def test_validation_refuses_before_work(overrides, message):
         prepare(compose_config(["scene=flag", *overrides]))
 
 
+def test_cfl_above_the_backend_range_warns(caplog):
+    cfg = compose_config(
+        ["wind=navier_stokes", "scene=fence", "grid.resolution=16", "sim.dt=0.5", "sim.duration=1"]
+    )
+    with caplog.at_level("WARNING", logger="windbench"):
+        setup = prepare(cfg)
+    assert setup.cfl == pytest.approx(6.0)
+    assert "CFL number 6 exceeds 5, the stable range of backend navier_stokes" in caplog.text
+
+
 def test_cfl_is_reported_in_the_dataset(run_config):
     _, ds = run_config(["scene=empty", "grid.resolution=8", "sim.duration=0.05"])
     assert ds.attrs["cfl"] == pytest.approx(6.0 * (1 / 60) / 0.5)

@@ -69,11 +69,10 @@ def prepare(cfg: DictConfig) -> RunSetup:
         cfg.output.snapshots >= 1, "output.snapshots", f"must be >= 1, got {cfg.output.snapshots}"
     )
     _require(cfg.output.probe_points >= 1, "output.probe_points", "must be >= 1")
-    backend_class(cfg.wind.name)  # unknown backend: error listing the allowed ones
+    backend = backend_class(cfg.wind.name)  # unknown backend: error listing the allowed ones
     scene = build_scene(cfg.scene)
-    resolution = int(cfg.grid.resolution)
-    _check_memory(scene, resolution)
-    grid = Grid.from_domain(scene.lower, scene.upper, resolution)
+    grid = Grid.from_domain(scene.lower, scene.upper, int(cfg.grid.resolution))  # no arrays yet
+    _check_memory(grid, int(cfg.grid.resolution))
     _check_bodies_resolved(scene, grid)
     for probe in ("lee", "free_stream"):
         _require(
@@ -81,7 +80,6 @@ def prepare(cfg: DictConfig) -> RunSetup:
             f"scene.probes.{probe}",
             "is required when a scene has probes (lee and free_stream go together)",
         )
-    backend = backend_class(cfg.wind.name)
     backend.check(scene, grid, cfg.wind)
     cfl = _check_cfl(scene, grid, dt, backend)
     n_steps = int(round(duration / dt))
@@ -107,16 +105,14 @@ def memory_bytes() -> int:
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
-def _check_memory(scene: Scene, resolution: int):
+def _check_memory(grid: Grid, resolution: int):
     """The grid must fit in memory at BYTES_PER_CELL; say how much it would need."""
-    extent = scene.upper - scene.lower
-    shape = np.maximum(1, np.round(extent / (extent.max() / max(resolution, 1))))
-    need = float(np.prod(shape)) * BYTES_PER_CELL
+    need = float(grid.n_cells) * BYTES_PER_CELL
     limit = MEMORY_FRACTION * memory_bytes()
     _require(
         need <= limit,
         "grid.resolution",
-        f"{resolution} gives {int(np.prod(shape))} cells needing about {need / 2**30:.1f} GiB "
+        f"{resolution} gives {grid.n_cells} cells needing about {need / 2**30:.1f} GiB "
         f"({BYTES_PER_CELL // 8} float64 per cell); this machine allows {limit / 2**30:.1f} GiB",
     )
 

@@ -240,6 +240,9 @@ class NavierStokesWind(WindField):
     """Stable-fluids wind on a MAC grid (see module docstring)."""
 
     name = "navier_stokes"
+    # Semi-Lagrangian advection is stable at any CFL, but a backtrace longer than a few
+    # cells jumps over thin walls and smears the flow: warn above 5 (Foster & Fedkiw 2001).
+    max_cfl = 5.0
 
     @classmethod
     def check(cls, scene, grid, params) -> None:
