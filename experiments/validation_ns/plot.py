@@ -36,26 +36,17 @@ def main():
         h = 2 * np.pi / hd.cells.to_numpy()
         axes[0].loglog(h, np.abs(hd.rate_rel_error), "o-", label=f"{scheme}: decay rate")
         axes[0].loglog(h, hd.linf_rel_error, "s--", label=f"{scheme}: L-inf u")
-        for n, p in zip(hd.cells.to_numpy()[1:], orders(h, hd.rate_rel_error), strict=True):
-            rows.append(
-                dict(
-                    study="taylor_green h+dt (CFL 0.5)",
-                    scheme=scheme,
-                    cells=n,
-                    metric="rate",
-                    order=p,
+        for metric, errors in (("rate", hd.rate_rel_error), ("linf", hd.linf_rel_error)):
+            for n, p in zip(hd.cells.to_numpy()[1:], orders(h, errors), strict=True):
+                rows.append(
+                    dict(
+                        study="taylor_green h+dt (CFL 0.5)",
+                        scheme=scheme,
+                        cells=n,
+                        metric=metric,
+                        order=p,
+                    )
                 )
-            )
-        for n, p in zip(hd.cells.to_numpy()[1:], orders(h, hd.linf_rel_error), strict=True):
-            rows.append(
-                dict(
-                    study="taylor_green h+dt (CFL 0.5)",
-                    scheme=scheme,
-                    cells=n,
-                    metric="linf",
-                    order=p,
-                )
-            )
         dd = grp[grp.study == "dt_at_64"].sort_values("dt", ascending=False)
         axes[1].loglog(dd.dt, np.abs(dd.rate_rel_error), "o-", label=scheme)
         for dt, p in zip(dd.dt.to_numpy()[1:], orders(dd.dt, dd.rate_rel_error), strict=True):
