@@ -64,16 +64,22 @@ def _cell_range(lo, hi, lower, h, n):
 
 
 @njit(cache=True)
-def _visit(positions, triangles, lower, h, shape, counts, start, items, fill):
-    """Count (fill=False) or store (fill=True) every (cell, triangle) overlap."""
-    nx, ny, nz = shape[0], shape[1], shape[2]
+def triangle_cell_pairs(positions, triangles, lower, h, shape):
+    """Sorted keys ``cell * m + t`` of every overlap of a cell and triangle t (m triangles).
+
+    Cost O(triangles x cells each overlaps), independent of the grid size.
+    """
+    ny, nz = shape[1], shape[2]
+    m = triangles.shape[0]
     half = np.full(3, 0.5 * h * (1.0 + 1e-9))
     centre = np.empty(3)
-    for t in range(triangles.shape[0]):
+    rng = np.empty((3, 2), dtype=np.int64)
+    keys = np.empty(4 * m + 16, dtype=np.int64)
+    n = 0
+    for t in range(m):
         a = positions[triangles[t, 0]]
         b = positions[triangles[t, 1]]
         c = positions[triangles[t, 2]]
-        rng = np.empty((3, 2), dtype=np.int64)
         for k in range(3):
             lo = min(a[k], b[k], c[k])
             hi = max(a[k], b[k], c[k])
@@ -86,27 +92,27 @@ def _visit(positions, triangles, lower, h, shape, counts, start, items, fill):
                     centre[2] = lower[2] + (k + 0.5) * h
                     if not triangle_box_overlap(a, b, c, centre, half):
                         continue
-                    cell = (i * ny + j) * nz + k
-                    if fill:
-                        items[start[cell] + counts[cell]] = t
-                    counts[cell] += 1
-    return nx
+                    if n == keys.shape[0]:
+                        grown = np.empty(2 * n, dtype=np.int64)
+                        grown[:n] = keys
+                        keys = grown
+                    keys[n] = ((i * ny + j) * nz + k) * m + t
+                    n += 1
+    return np.sort(keys[:n])
 
 
 @njit(cache=True)
 def register_triangles(positions, triangles, lower, h, shape):
     """CSR (start ``(n_cells + 1,)``, items) of the triangles overlapping each cell."""
     n_cells = shape[0] * shape[1] * shape[2]
-    counts = np.zeros(n_cells, dtype=np.int64)
+    keys = triangle_cell_pairs(positions, triangles, lower, h, shape)
+    m = max(triangles.shape[0], 1)
     start = np.zeros(n_cells + 1, dtype=np.int64)
-    items = np.zeros(0, dtype=np.int64)
-    _visit(positions, triangles, lower, h, shape, counts, start, items, False)
+    for key in keys:
+        start[key // m + 1] += 1
     for c in range(n_cells):
-        start[c + 1] = start[c] + counts[c]
-    items = np.empty(start[n_cells], dtype=np.int64)
-    counts[:] = 0
-    _visit(positions, triangles, lower, h, shape, counts, start, items, True)
-    return start, items
+        start[c + 1] += start[c]
+    return start, keys % m
 
 
 def triangle_cells(positions, triangles, grid):

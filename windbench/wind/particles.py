@@ -69,17 +69,20 @@ import numpy as np
 
 from windbench.errors import ConfigError
 from windbench.geometry.bodies import body_table
-from windbench.geometry.raster import triangle_cells
+from windbench.geometry.raster import triangle_cell_pairs
 from windbench.wind.base import Obstacles, WindField
 from windbench.wind.emission import emitters_from_scene
 from windbench.wind.primitives import parameter_table
 from windbench.wind.tracing import (
+    BODIES,
     MARK_MODES,
     ROW,
-    assemble_cells,
+    SOLID,
+    expire_cells,
     outside_bodies,
     reached_sources,
     register_bodies,
+    register_cloth,
     trace_gusts,
 )
 
@@ -119,30 +122,44 @@ class ParticleWind(WindField):
         super().__init__(scene, grid, params)
         _check(params)
         self.emitters = emitters_from_scene(scene, grid, params, int(params.seed))
-        # model: fixed tables for the kernels
+        # model: fixed tables for the kernels, parameters read once
         self._kinds, self._prims = parameter_table(scene.sources)
         self._body_kinds, self._body_params = body_table(scene.bodies)
         self._lower = np.asarray(grid.lower, dtype=np.float64)
+        self._upper = np.asarray(grid.upper, dtype=np.float64)
         self._shape = np.asarray(grid.shape, dtype=np.int64)
+        self._h = float(grid.h)
         self._body_start, self._body_items = register_bodies(
-            self._body_kinds, self._body_params, self._lower, float(grid.h), self._shape
+            self._body_kinds, self._body_params, self._lower, self._h, self._shape
         )
-        self._solid_flat = np.ascontiguousarray(self.solid_mask().reshape(-1))
-        self._no_triangles = (np.zeros(grid.n_cells + 1, np.int64), np.zeros(0, np.int64))
         self._capacity = int(params.max_particles)
         self._memory = float(params.memory)
+        self._max_age = float(params.max_age)
+        self._max_hits = int(params.max_hits)
+        self._mark_mode = MARK_MODES[params.deflected_cells]
+        self._seed = int(params.seed)
         # state
         n_sources = len(scene.sources)
         self.time = 0.0
         self._steps = 0
-        self._positions = np.zeros((0, 3))
-        self._sources = np.zeros(0, dtype=np.int64)
-        self._ages = np.zeros(0)
+        # particles 0.._n-1 of buffers grown on demand: position, source id, age
+        self._n = 0
+        self._pos = np.zeros((0, 3))
+        self._src = np.zeros(0, dtype=np.int64)
+        self._age = np.zeros(0)
         self._carry = np.zeros(n_sources)
         self._counter = np.zeros(n_sources, dtype=np.int64)
+        # per (cell, source): [t, ux, uy, uz] of the last mark; t = -inf: never reached
         self._reach = np.zeros((grid.n_cells, max(n_sources, 1), ROW))
         self._reach[:, :, 0] = -np.inf
         self._u = np.zeros((grid.n_cells, 3))
+        # per cell: SOLID (centre in a body), BODIES (bodies registered), TRIANGLES (cloth)
+        self._flags = np.zeros(grid.n_cells, dtype=np.uint8)
+        self._flags[self.solid_mask().reshape(-1)] |= SOLID
+        self._flags[np.diff(self._body_start) > 0] |= BODIES
+        self._tri_slot = np.zeros(0, dtype=np.int64)  # grown to n_cells with the first cloth
+        self._tri_cells = np.zeros(0, dtype=np.int64)  # cells flagged TRIANGLES
+        self._no_triangles = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 2, 3)))
         self._touched = np.zeros(1024, dtype=np.int64)
         self._history: deque[tuple[float, np.ndarray]] = deque()
         self._stats: dict[str, float] = {}
@@ -163,114 +180,134 @@ class ParticleWind(WindField):
             self._stats["dropped_particles"] = 0.0
             return np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0)
         pos, src, dur = np.concatenate(pos), np.concatenate(src), np.concatenate(dur)
-        keep = self.grid.contains(pos, tol=0.0) & np.all(
-            pos < self.grid.upper, axis=1
-        )  # inside the grid's half-open box
+        keep = np.all((pos >= self._lower) & (pos < self._upper), axis=1)  # half-open box
         if self.scene.bodies:
             outside_bodies(self._body_kinds, self._body_params, pos, keep)
-        room = self._capacity - self._positions.shape[0]
+        room = self._capacity - self._n
         idx = np.flatnonzero(keep)[: max(room, 0)]
         self._stats["dropped_particles"] = float(len(keep) - len(idx))
         return pos[idx], src[idx], dur[idx]
 
+    def _append(self, positions: np.ndarray, sources: np.ndarray) -> None:
+        """Put particles (age 0) after the live ones, growing the buffers when full."""
+        n, k = self._n, len(positions)
+        if n + k > len(self._pos):
+            size = max(n + k, 2 * len(self._pos), 1024)
+            for name in ("_pos", "_src", "_age"):
+                old = getattr(self, name)
+                grown = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
+                grown[:n] = old[:n]
+                setattr(self, name, grown)
+        self._pos[n : n + k] = positions
+        self._src[n : n + k] = sources
+        self._age[n : n + k] = 0.0
+        self._n = n + k
+
     def add_particles(self, positions, sources):
         """Insert particles (tests, benchmarks); the next step traces them for its full dt."""
         positions = np.atleast_2d(np.asarray(positions, dtype=np.float64))
-        self._positions = np.concatenate([self._positions, positions])
-        self._sources = np.concatenate([self._sources, np.asarray(sources, dtype=np.int64)])
-        self._ages = np.concatenate([self._ages, np.zeros(len(positions))])
+        self._append(positions, np.asarray(sources, dtype=np.int64))
 
     # ---------------------------------------------------------------- step
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
         t_start, t_end = self.time, self.time + dt
+        n_old = self._n
         new_pos, new_src, new_dur = self._emit(t_start, t_end)
-        n_old = self._positions.shape[0]
-        positions = np.concatenate([self._positions, new_pos])
-        sources = np.concatenate([self._sources, new_src])
-        durations = np.concatenate([np.full(n_old, dt), new_dur])
-        ages = np.concatenate([self._ages, np.zeros(len(new_pos))]) + durations
+        self._append(new_pos, new_src)
         t1 = time.perf_counter()
-        cloth_pos = np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64)
-        cloth_tris = np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64)
-        if cloth_tris.shape[0]:
-            tri_start, tri_items = triangle_cells(cloth_pos, cloth_tris, self.grid)
-            corners = cloth_pos[cloth_tris]  # (m, 3 corners, 3)
-            tri_bounds = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
-        else:
-            tri_start, tri_items = self._no_triangles
-            tri_bounds = np.zeros((0, 2, 3))
-        out = np.empty_like(positions)
-        alive = np.empty(len(positions), dtype=np.bool_)
-        self._touched, n_touched, crossings = trace_gusts(
-            positions,
-            sources,
-            durations,
+        tri_slot, tri_start, tri_items, tri_bounds = self._register_cloth(obstacles)
+        n_traced = self._n
+        self._touched, n_touched, crossings, self._n = trace_gusts(
+            n_traced,
+            n_old,
+            dt,
+            np.ascontiguousarray(new_dur),
+            self._max_age,
             self._kinds,
             self._prims,
             self._lower,
-            float(self.grid.h),
+            self._h,
             self._shape,
+            self._flags,
             self._body_kinds,
             self._body_params,
             self._body_start,
             self._body_items,
-            cloth_pos,
-            cloth_tris,
+            self._cloth_pos,
+            self._cloth_tris,
             tri_bounds,
+            tri_slot,
             tri_start,
             tri_items,
             t_end,
-            CONTACT_OFFSET * self.grid.h,
-            int(self.params.max_hits),
-            MARK_MODES[self.params.deflected_cells],
+            self._memory,
+            CONTACT_OFFSET * self._h,
+            self._max_hits,
+            self._mark_mode,
+            self._pos,
+            self._src,
+            self._age,
             self._reach,
+            self._u,
             self._touched,
-            out,
-            alive,
         )
         t2 = time.perf_counter()
-        keep = alive & (ages <= self.params.max_age)
-        self._positions, self._sources, self._ages = out[keep], sources[keep], ages[keep]
         self._steps += 1
         if self._steps % SORT_EVERY == 0:
             self._sort_by_cell()
         self.time = t_end
-        self._assemble(self._touched[:n_touched].copy())
+        self._expire(self._touched[:n_touched].copy())
         t3 = time.perf_counter()
         trace = t2 - t1
         self._stats.update(
-            live_particles=float(len(self._positions)),
+            live_particles=float(self._n),
             emitted_particles=float(len(new_pos)),
             cell_crossings=float(crossings),
-            particle_steps_per_second=len(positions) / trace if trace > 0 else 0.0,
+            particle_steps_per_second=n_traced / trace if trace > 0 else 0.0,
             emit_seconds=t1 - t0,
             trace_seconds=trace,
             assemble_seconds=t3 - t2,
         )
 
+    def _register_cloth(self, obstacles: Obstacles):
+        """Flag the cells the cloth triangles overlap now: (slot, start, items, bounds)."""
+        self._cloth_pos = np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64)
+        self._cloth_tris = np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64)
+        m = self._cloth_tris.shape[0]
+        if m == 0 and len(self._tri_cells) == 0:
+            return self._tri_slot, *self._no_triangles
+        if len(self._tri_slot) == 0:
+            self._tri_slot = np.zeros(self.grid.n_cells, dtype=np.int64)
+        keys = triangle_cell_pairs(
+            self._cloth_pos, self._cloth_tris, self._lower, self._h, self._shape
+        )
+        self._tri_cells, start, items = register_cloth(
+            keys, max(m, 1), self._tri_cells, self._flags, self._tri_slot
+        )
+        corners = self._cloth_pos[self._cloth_tris]  # (m, 3 corners, 3)
+        bounds = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
+        return self._tri_slot, start, items, bounds
+
     def _sort_by_cell(self) -> None:
         """Reorder the particles by cell id (stable), so that tracing walks memory in order."""
-        idx = np.floor((self._positions - self._lower) / self.grid.h).astype(np.int64)
+        n = self._n
+        idx = np.floor((self._pos[:n] - self._lower) / self._h).astype(np.int64)
         np.clip(idx, 0, self._shape - 1, out=idx)
         key = (idx[:, 0] * self._shape[1] + idx[:, 1]) * self._shape[2] + idx[:, 2]
         order = np.argsort(key, kind="stable")
-        self._positions, self._sources, self._ages = (
-            self._positions[order],
-            self._sources[order],
-            self._ages[order],
-        )
+        self._pos[:n] = self._pos[order]
+        self._src[:n] = self._src[order]
+        self._age[:n] = self._age[order]
 
-    def _assemble(self, touched: np.ndarray) -> None:
-        """Refresh u in the cells marked this step and in those whose marks just expired."""
+    def _expire(self, touched: np.ndarray) -> None:
+        """Keep this step's marked cells; refresh u where marks older than memory lapse."""
         self._history.append((self.time, touched))
-        parts = [touched]
         while (
             self._history and self.time - self._history[0][0] > self._memory * (1 + 1e-12) + 1e-12
         ):
-            parts.append(self._history.popleft()[1])
-        cells = np.concatenate(parts) if len(parts) > 1 else touched
-        assemble_cells(cells, self._reach, self._solid_flat, self.time, self._memory, self._u)
+            t_mark, cells = self._history.popleft()
+            expire_cells(cells, t_mark, self._reach, self._flags, self.time, self._memory, self._u)
 
     # ---------------------------------------------------------------- queries
     def velocity(self) -> np.ndarray:
@@ -295,4 +332,5 @@ class ParticleWind(WindField):
     @property
     def particles(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Live particles: positions ``(n, 3)``, source ids ``(n,)``, ages ``(n,)`` (copies)."""
-        return self._positions.copy(), self._sources.copy(), self._ages.copy()
+        n = self._n
+        return self._pos[:n].copy(), self._src[:n].copy(), self._age[:n].copy()

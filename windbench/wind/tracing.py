@@ -40,7 +40,8 @@ from windbench.geometry.bodies import body_distance, union_distance_point
 from windbench.geometry.raster import segment_triangle
 from windbench.wind.primitives import primitive_velocity
 
-ROW = 5  # t, deflected, ux, uy, uz
+ROW = 4  # t, ux, uy, uz
+SOLID, BODIES, TRIANGLES = 1, 2, 4  # bits of the per-cell flags
 MARK_NONE, MARK_BODIES, MARK_ALL = 0, 1, 2  # which hits make the marks "deflected"
 MARK_MODES = {"none": MARK_NONE, "bodies": MARK_BODIES, "all": MARK_ALL}
 ROOT_ITERATIONS = 60
@@ -82,6 +83,37 @@ def register_bodies(kinds, params, lower, h, shape):
                                 items[start[c] + counts[c]] = b
                                 counts[c] += 1
     return start, items
+
+
+@njit(cache=True)
+def register_cloth(keys, m, previous, flags, tri_slot):
+    """Flag the cells the cloth triangles overlap, in O(overlaps) (no pass over the grid).
+
+    ``keys`` are the sorted ``cell * m + t`` of :func:`windbench.geometry.raster.
+    triangle_cell_pairs`; ``previous`` the cells flagged last step, whose TRIANGLES bit is
+    cleared first. Sets the bit and ``tri_slot[cell]`` = the cell's row in the returned
+    CSR; returns (cells, start, items): the triangles of ``cells[r]`` are
+    ``items[start[r]:start[r + 1]]`` (ascending).
+    """
+    for c in previous:
+        flags[c] &= ~np.uint8(TRIANGLES)
+    n_rows = 0
+    for q in range(keys.shape[0]):
+        if q == 0 or keys[q] // m != keys[q - 1] // m:
+            n_rows += 1
+    cells = np.empty(n_rows, dtype=np.int64)
+    start = np.empty(n_rows + 1, dtype=np.int64)
+    r = -1
+    for q in range(keys.shape[0]):
+        c = keys[q] // m
+        if r < 0 or c != cells[r]:
+            r += 1
+            cells[r] = c
+            start[r] = q
+            flags[c] |= np.uint8(TRIANGLES)
+            tri_slot[c] = r
+    start[n_rows] = keys.shape[0]
+    return cells, start, keys % m
 
 
 @njit(cache=True)
@@ -160,13 +192,49 @@ def _push(touched, n_touched, cell):
 
 
 @njit(cache=True, inline="always")
+def _reached(t_cell, t_now, memory):
+    """A reach at t_cell counts at t_now while t_now - t_cell <= memory (round-off slack)."""
+    return t_now - t_cell <= memory * (1.0 + 1e-12) + 1e-12
+
+
+@njit(cache=True, inline="always")
+def _assemble_cell(c, reach, t_now, memory, u):
+    """u[c] = sum of the values of the sources that reached cell c within memory."""
+    u[c, 0] = 0.0
+    u[c, 1] = 0.0
+    u[c, 2] = 0.0
+    for s in range(reach.shape[1]):
+        if _reached(reach[c, s, 0], t_now, memory):
+            u[c, 0] += reach[c, s, 1]
+            u[c, 1] += reach[c, s, 2]
+            u[c, 2] += reach[c, s, 3]
+
+
+@njit(cache=True, inline="always")
 def _mark(
-    kind, prm, normals, n_normals, lower, h, shape, idx, s, t_now, reach, wc, touched, n_touched
+    kind,
+    prm,
+    normals,
+    n_normals,
+    lower,
+    h,
+    shape,
+    idx,
+    s,
+    t_now,
+    memory,
+    flags,
+    reach,
+    u,
+    wc,
+    touched,
+    n_touched,
 ):
     """Mark cell idx = (i, j, k) for source s at t_now with w_i(centre), the first n_normals
-    contact normals removed; a deflected mark (n_normals > 0) beats a free one within a
-    step. A cell's first mark of the step goes on the ``touched`` list (for the assembly);
-    returns (touched, n_touched)."""
+    contact normals removed, and refresh u there (zero in solid cells). A deflected mark
+    (n_normals > 0) beats a free one within a step. A cell's first mark of the step goes
+    on the ``touched`` list (whose marks expire ``memory`` later); returns
+    (touched, n_touched)."""
     cell = (idx[0] * shape[1] + idx[1]) * shape[2] + idx[2]
     first = reach[cell, s, 0] != t_now
     if not first and n_normals == 0:
@@ -184,10 +252,11 @@ def _mark(
         wc[1] -= dn * normals[m, 1]
         wc[2] -= dn * normals[m, 2]
     reach[cell, s, 0] = t_now
-    reach[cell, s, 1] = 1.0 if n_normals > 0 else 0.0
-    reach[cell, s, 2] = wc[0]
-    reach[cell, s, 3] = wc[1]
-    reach[cell, s, 4] = wc[2]
+    reach[cell, s, 1] = wc[0]
+    reach[cell, s, 2] = wc[1]
+    reach[cell, s, 3] = wc[2]
+    if not flags[cell] & SOLID:
+        _assemble_cell(cell, reach, t_now, memory, u)
     if first:
         touched = _push(touched, n_touched, cell)
         n_touched += 1
@@ -196,14 +265,17 @@ def _mark(
 
 @njit(cache=True)
 def trace_gusts(
-    positions,
-    sources,
-    durations,
+    n,
+    n_old,
+    dt,
+    new_durations,
+    max_age,
     kinds,
     prims,
     lower,
     h,
     shape,
+    flags,
     body_kinds,
     body_params,
     body_start,
@@ -211,27 +283,39 @@ def trace_gusts(
     cloth_positions,
     cloth_triangles,
     tri_bounds,
+    tri_slot,
     tri_start,
     tri_items,
     t_now,
+    memory,
     delta,
     max_hits,
     mark_mode,
+    positions,
+    sources,
+    ages,
     reach,
+    u,
     touched,
-    positions_out,
-    alive_out,
 ):
-    """Advance every particle by its duration in its own w_i (p += w_i(p) tau), mark cells.
+    """Advance particles 0..n-1 in their own w_i (p += w_i(p) tau), mark cells, refresh u.
 
-    ``tri_bounds`` (m, 2, 3) are the cloth triangles' bounding boxes (min, max): a cheap
-    test before Möller-Trumbore. ``reach`` (n_cells, n_sources, ROW) is updated in place;
-    ``touched`` collects the cells first marked this step (grown when full). Returns
-    (touched, n_touched, crossings).
+    Particle q moves for tau = dt (q < n_old) or ``new_durations[q - n_old]`` (emitted
+    within the step). ``positions``, ``sources``, ``ages`` are updated in place and
+    compacted: the particles that stay alive (inside the grid, not stagnated, age <=
+    ``max_age``) keep their order at the front. ``flags`` (uint8 per cell: SOLID, BODIES,
+    TRIANGLES) say which cells hold obstacles, so a piece reads the registries only where
+    there is something to test; the triangles of a flagged cell are
+    ``tri_items[tri_start[tri_slot[cell]] : tri_start[tri_slot[cell] + 1]]``.
+    ``tri_bounds`` (m, 2, 3) are the triangles' bounding boxes (min, max): a cheap test
+    before Möller-Trumbore. ``reach`` (n_cells, n_sources, ROW) and ``u`` are updated in
+    place (u only in the cells marked); ``touched`` collects the cells first marked this
+    step (grown when full). Returns (touched, n_touched, crossings, n_alive).
     """
     ny, nz = shape[1], shape[2]
     n_touched = 0
     crossings = 0
+    n_alive = 0
     w = np.empty(3)
     wc = np.empty(3)
     hit_n = np.empty(3)
@@ -247,16 +331,17 @@ def trace_gusts(
     step = np.empty(3, dtype=np.int64)  # +-1 per axis
     t_next = np.empty(3)  # path parameter of the next cell face per axis
     t_cell = np.empty(3)  # path parameter per cell width per axis
-    for q in range(positions.shape[0]):
+    for q in range(n):
         s = sources[q]
         kind = kinds[s]
         prm = prims[s]
         for ax in range(3):
             p[ax] = positions[q, ax]
+        duration = dt if q < n_old else new_durations[q - n_old]
         primitive_velocity(kind, prm, p[0], p[1], p[2], w)  # Euler: w_i(p_t)
         w2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
         v[:] = w
-        remaining = durations[q]
+        remaining = duration
         n_hits = 0
         n_marks = 0  # hits whose normal the cell marks remove (see mark_mode)
         alive = True
@@ -285,54 +370,59 @@ def trace_gusts(
             while True:
                 t_exit = max(t, min(t_next[0], t_next[1], t_next[2], 1.0))
                 cell = (cur[0] * ny + cur[1]) * nz + cur[2]
-                # the piece a -> b lies in this cell: test what is registered here
-                for ax in range(3):
-                    a[ax] = p[ax] + t * e[ax]
-                    b[ax] = p[ax] + t_exit * e[ax]
                 best = 2.0
                 body_hit = False
-                for m in range(body_start[cell], body_start[cell + 1]):
-                    bi = body_items[m]
-                    sh = convex_first_hit(
-                        body_kinds[bi],
-                        body_params[bi],
-                        a[0],
-                        a[1],
-                        a[2],
-                        b[0] - a[0],
-                        b[1] - a[1],
-                        b[2] - a[2],
-                        scratch,
-                        tmp_n,
-                    )
-                    if 0.0 <= sh < best:
-                        best = sh
-                        body_hit = True
-                        hit_n[:] = tmp_n
-                for m in range(tri_start[cell], tri_start[cell + 1]):
-                    tri = tri_items[m]
-                    # bounding boxes apart: the piece cannot meet this triangle
-                    apart = False
+                obstacles = flags[cell] & (BODIES | TRIANGLES)
+                if obstacles:
+                    # the piece a -> b lies in this cell: test what is registered here
                     for ax in range(3):
-                        lo_ab = min(a[ax], b[ax])
-                        hi_ab = max(a[ax], b[ax])
-                        if lo_ab > tri_bounds[tri, 1, ax] or hi_ab < tri_bounds[tri, 0, ax]:
-                            apart = True
-                    if apart:
-                        continue
-                    va = cloth_positions[cloth_triangles[tri, 0]]
-                    vb = cloth_positions[cloth_triangles[tri, 1]]
-                    vc = cloth_positions[cloth_triangles[tri, 2]]
-                    sh = segment_triangle(a, b, va, vb, vc)
-                    if 0.0 <= sh < best:
-                        best = sh
-                        body_hit = False
-                        # the triangle's unit normal, turned to face the particle
-                        tri_n = np.cross(vb - va, vc - va)
-                        tri_n /= np.sqrt((tri_n * tri_n).sum())
-                        if tri_n[0] * e[0] + tri_n[1] * e[1] + tri_n[2] * e[2] > 0.0:
-                            tri_n = -tri_n
-                        hit_n[:] = tri_n
+                        a[ax] = p[ax] + t * e[ax]
+                        b[ax] = p[ax] + t_exit * e[ax]
+                if obstacles & BODIES:
+                    for m in range(body_start[cell], body_start[cell + 1]):
+                        bi = body_items[m]
+                        sh = convex_first_hit(
+                            body_kinds[bi],
+                            body_params[bi],
+                            a[0],
+                            a[1],
+                            a[2],
+                            b[0] - a[0],
+                            b[1] - a[1],
+                            b[2] - a[2],
+                            scratch,
+                            tmp_n,
+                        )
+                        if 0.0 <= sh < best:
+                            best = sh
+                            body_hit = True
+                            hit_n[:] = tmp_n
+                if obstacles & TRIANGLES:
+                    slot = tri_slot[cell]
+                    for m in range(tri_start[slot], tri_start[slot + 1]):
+                        tri = tri_items[m]
+                        # bounding boxes apart: the piece cannot meet this triangle
+                        apart = False
+                        for ax in range(3):
+                            lo_ab = min(a[ax], b[ax])
+                            hi_ab = max(a[ax], b[ax])
+                            if lo_ab > tri_bounds[tri, 1, ax] or hi_ab < tri_bounds[tri, 0, ax]:
+                                apart = True
+                        if apart:
+                            continue
+                        va = cloth_positions[cloth_triangles[tri, 0]]
+                        vb = cloth_positions[cloth_triangles[tri, 1]]
+                        vc = cloth_positions[cloth_triangles[tri, 2]]
+                        sh = segment_triangle(a, b, va, vb, vc)
+                        if 0.0 <= sh < best:
+                            best = sh
+                            body_hit = False
+                            # the triangle's unit normal, turned to face the particle
+                            tri_n = np.cross(vb - va, vc - va)
+                            tri_n /= np.sqrt((tri_n * tri_n).sum())
+                            if tri_n[0] * e[0] + tri_n[1] * e[1] + tri_n[2] * e[2] > 0.0:
+                                tri_n = -tri_n
+                            hit_n[:] = tri_n
                 if best <= 1.0:
                     n_hits += 1
                     if mark_mode == MARK_ALL or (mark_mode == MARK_BODIES and body_hit):
@@ -349,7 +439,10 @@ def trace_gusts(
                     cur,
                     s,
                     t_now,
+                    memory,
+                    flags,
                     reach,
+                    u,
                     wc,
                     touched,
                     n_touched,
@@ -389,33 +482,31 @@ def trace_gusts(
                 if not 0 <= cur[ax] < shape[ax]:
                     alive = False
                     break
-        for ax in range(3):
-            positions_out[q, ax] = p[ax]
-        alive_out[q] = alive and not stagnant
-    return touched, n_touched, crossings
-
-
-@njit(cache=True, inline="always")
-def _reached(t_cell, t_now, memory):
-    """A reach at t_cell counts at t_now while t_now - t_cell <= memory (round-off slack)."""
-    return t_now - t_cell <= memory * (1.0 + 1e-12) + 1e-12
+        age = ages[q] + duration
+        if alive and not stagnant and age <= max_age:
+            for ax in range(3):
+                positions[n_alive, ax] = p[ax]
+            sources[n_alive] = s
+            ages[n_alive] = age
+            n_alive += 1
+    return touched, n_touched, crossings, n_alive
 
 
 @njit(cache=True)
-def assemble_cells(cells, reach, solid, t_now, memory, u):
-    """u[c] = sum over sources reached within memory of their stored value; 0 in solids."""
+def expire_cells(cells, t_mark, reach, flags, t_now, memory, u):
+    """Refresh u in the cells marked at t_mark whose mark has just expired.
+
+    A cell of the list whose marks of t_mark have all been renewed since keeps its u
+    (nothing about it changed); the others get u = sum of the still-reached sources.
+    """
     for m in range(cells.shape[0]):
         c = cells[m]
-        u[c, 0] = 0.0
-        u[c, 1] = 0.0
-        u[c, 2] = 0.0
-        if solid[c]:
+        if flags[c] & SOLID:
             continue
         for s in range(reach.shape[1]):
-            if _reached(reach[c, s, 0], t_now, memory):
-                u[c, 0] += reach[c, s, 2]
-                u[c, 1] += reach[c, s, 3]
-                u[c, 2] += reach[c, s, 4]
+            if reach[c, s, 0] == t_mark:
+                _assemble_cell(c, reach, t_now, memory, u)
+                break
 
 
 @njit(cache=True)
