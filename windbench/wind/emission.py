@@ -44,7 +44,9 @@ at a uniformly jittered point, in a seeded random order. A round of the automati
 lasts ``memory / particles_per_cell``, so no cell of the emitting face waits longer than
 two rounds for its next particle (plain random emission leaves Poisson gaps). Emission
 instants within a step are uniform over its emitting time. Everything random comes from
-``numpy.random.default_rng([seed, source, round])``: the same seed gives the same
+``numpy.random.default_rng([seed, source, block])``, a block being the B >= 1 consecutive
+rounds that make at least ``BLOCK`` samples (one random stream per few thousand particles,
+drawn once and kept by the backend while it lasts): the same seed gives the same
 particles bit for bit. Candidates that fall outside the grid or inside a rigid body are
 dropped (``rate`` counts candidates).
 """
@@ -61,6 +63,7 @@ from windbench.errors import ConfigError
 FACES, BOX, SPHERE, CYLINDER = "faces", "box", "sphere", "cylinder"
 EMIT_KEYS = {"rate", "radius", "box"}
 GUST_KEYS = {"on", "off", "start"}
+BLOCK = 4096  # samples drawn from one random stream (whole rounds, at least one)
 
 
 @dataclass(frozen=True)
@@ -148,10 +151,17 @@ class Emitter:
             out[sel, b] = row[4] + u[sel, 1] * (row[5] - row[4])
         return out
 
-    def round_samples(self, r: int) -> np.ndarray:
-        """Round r: the M unit-cube points (one per stratum, seeded order) and instants."""
-        rng = np.random.default_rng([self.seed, self.source, r])
-        order = rng.permutation(len(self.strata))
+    @property
+    def rounds_per_block(self) -> int:
+        """Rounds drawn together from one random stream: about BLOCK samples a block."""
+        return max(1, -(-BLOCK // len(self.strata)))
+
+    def block_samples(self, b: int) -> np.ndarray:
+        """Block b: rounds b B .. b B + B - 1, each the M strata (one point each) in a seeded
+        random order; ``(B M, 4)`` unit-cube points (columns 0-2) and instants (column 3)."""
+        m, rounds = len(self.strata), self.rounds_per_block
+        rng = np.random.default_rng([self.seed, self.source, b])
+        order = rng.permuted(np.tile(np.arange(m), (rounds, 1)), axis=1).reshape(-1)
         jitter = rng.random((len(order), 4))
         box = self.strata[order]
         out = np.empty((len(order), 4))
@@ -159,21 +169,29 @@ class Emitter:
         out[:, 3] = jitter[:, 3]
         return out
 
-    def emit(self, t0: float, t1: float, carry: float, counter: int):
+    def emit(self, t0: float, t1: float, carry: float, counter: int, cache: dict | None = None):
         """Candidates emitted in [t0, t1): (positions, emission instants, carry, counter).
 
         The number is ``rate * (on-time in the step) + carry`` rounded down; the fraction is
-        carried to the next step, so the long-run count is exact. Particle n is round
-        n // M's sample n % M.
+        carried to the next step, so the long-run count is exact. Particle n is sample
+        n mod (B M) of block n // (B M) (:meth:`block_samples`). ``cache`` (the caller's
+        state, optional) keeps the last block drawn, so a block is drawn once, not once
+        per step that uses it: the cost per step is O(particles emitted).
         """
         f0, f1 = self.gusts.on_time(t0), self.gusts.on_time(t1)
         expected = self.rate * (f1 - f0) + carry
         n = int(np.floor(expected))
         carry = expected - n
-        m = len(self.strata)
-        first, last = counter // m, (counter + n - 1) // m if n else counter // m - 1
-        rounds = [self.round_samples(r) for r in range(first, last + 1)]
-        u = np.concatenate(rounds)[counter - first * m :][:n] if rounds else np.zeros((0, 4))
+        per = len(self.strata) * self.rounds_per_block
+        cache = {} if cache is None else cache
+        chunks = [np.zeros((0, 4))]
+        last = (counter + n - 1) // per if n else counter // per - 1
+        for b in range(counter // per, last + 1):
+            if cache.get("block") != b:
+                cache["block"], cache["samples"] = b, self.block_samples(b)
+            lo = max(counter - b * per, 0)
+            chunks.append(cache["samples"][lo : min(counter + n - b * per, per)])
+        u = np.concatenate(chunks) if len(chunks) > 2 else chunks[-1]
         instants = self.gusts.instant(f0 + u[:, 3] * (f1 - f0))
         return self.points(u), np.clip(instants, t0, t1), carry, counter + n
 

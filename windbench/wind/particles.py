@@ -149,6 +149,7 @@ class ParticleWind(WindField):
         self._age = np.zeros(0)
         self._carry = np.zeros(n_sources)
         self._counter = np.zeros(n_sources, dtype=np.int64)
+        self._blocks = [{} for _ in range(n_sources)]  # each source's current sample block
         # per (cell, source): [t, ux, uy, uz] of the last mark; t = -inf: never reached
         self._reach = np.zeros((grid.n_cells, max(n_sources, 1), ROW))
         self._reach[:, :, 0] = -np.inf
@@ -170,7 +171,7 @@ class ParticleWind(WindField):
         pos, src, dur = [], [], []
         for e in self.emitters:
             p, instants, carry, counter = e.emit(
-                t0, t1, self._carry[e.source], int(self._counter[e.source])
+                t0, t1, self._carry[e.source], int(self._counter[e.source]), self._blocks[e.source]
             )
             self._carry[e.source], self._counter[e.source] = carry, counter
             pos.append(p)
