@@ -83,6 +83,7 @@ from windbench.wind.tracing import (
     reached_sources,
     register_bodies,
     register_cloth,
+    sort_by_cell,
     trace_gusts,
 )
 
@@ -292,14 +293,7 @@ class ParticleWind(WindField):
 
     def _sort_by_cell(self) -> None:
         """Reorder the particles by cell id (stable), so that tracing walks memory in order."""
-        n = self._n
-        idx = np.floor((self._pos[:n] - self._lower) / self._h).astype(np.int64)
-        np.clip(idx, 0, self._shape - 1, out=idx)
-        key = (idx[:, 0] * self._shape[1] + idx[:, 1]) * self._shape[2] + idx[:, 2]
-        order = np.argsort(key, kind="stable")
-        self._pos[:n] = self._pos[order]
-        self._src[:n] = self._src[order]
-        self._age[:n] = self._age[order]
+        sort_by_cell(self._n, self._lower, self._h, self._shape, self._pos, self._src, self._age)
 
     def _expire(self, touched: np.ndarray) -> None:
         """Keep this step's marked cells; refresh u where marks older than memory lapse."""

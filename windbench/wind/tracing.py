@@ -45,6 +45,8 @@ SOLID, BODIES, TRIANGLES = 1, 2, 4  # bits of the per-cell flags
 MARK_NONE, MARK_BODIES, MARK_ALL = 0, 1, 2  # which hits make the marks "deflected"
 MARK_MODES = {"none": MARK_NONE, "bodies": MARK_BODIES, "all": MARK_ALL}
 ROOT_ITERATIONS = 60
+RADIX_BITS = 11  # bits of the cell id sorted per pass of sort_by_cell
+RADIX = 1 << RADIX_BITS
 
 
 @njit(cache=True)
@@ -507,6 +509,52 @@ def expire_cells(cells, t_mark, reach, flags, t_now, memory, u):
             if reach[c, s, 0] == t_mark:
                 _assemble_cell(c, reach, t_now, memory, u)
                 break
+
+
+@njit(cache=True)
+def sort_by_cell(n, lower, h, shape, positions, sources, ages):
+    """Reorder particles 0..n-1 in place by cell id c = (i * ny + j) * nz + k, stably.
+
+    LSD radix sort, 11 bits of c a pass (two passes up to 4 M cells): O(n) per pass, no
+    pass over the grid.
+    """
+    keys = np.empty(n, dtype=np.int64)
+    for q in range(n):
+        c = 0
+        for ax in range(3):
+            i = int(np.floor((positions[q, ax] - lower[ax]) / h))
+            c = c * shape[ax] + min(max(i, 0), shape[ax] - 1)
+        keys[q] = c
+    order = np.arange(n)
+    order_tmp = np.empty(n, dtype=np.int64)
+    keys_tmp = np.empty(n, dtype=np.int64)
+    count = np.empty(RADIX + 1, dtype=np.int64)
+    top = shape[0] * shape[1] * shape[2] - 1
+    shift = 0
+    while top >> shift > 0:
+        count[:] = 0
+        for q in range(n):
+            count[((keys[q] >> shift) & (RADIX - 1)) + 1] += 1
+        for d in range(RADIX):
+            count[d + 1] += count[d]
+        for q in range(n):
+            d = (keys[q] >> shift) & (RADIX - 1)
+            order_tmp[count[d]] = order[q]
+            keys_tmp[count[d]] = keys[q]
+            count[d] += 1
+        order, order_tmp = order_tmp, order
+        keys, keys_tmp = keys_tmp, keys
+        shift += RADIX_BITS
+    old_positions = positions[:n].copy()
+    old_sources = sources[:n].copy()
+    old_ages = ages[:n].copy()
+    for q in range(n):
+        o = order[q]
+        positions[q, 0] = old_positions[o, 0]
+        positions[q, 1] = old_positions[o, 1]
+        positions[q, 2] = old_positions[o, 2]
+        sources[q] = old_sources[o]
+        ages[q] = old_ages[o]
 
 
 @njit(cache=True)
