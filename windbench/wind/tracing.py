@@ -202,14 +202,17 @@ def _reached(t_cell, t_now, memory):
 @njit(cache=True, inline="always")
 def _assemble_cell(c, reach, t_now, memory, u):
     """u[c] = sum of the values of the sources that reached cell c within memory."""
-    u[c, 0] = 0.0
-    u[c, 1] = 0.0
-    u[c, 2] = 0.0
+    ux = 0.0
+    uy = 0.0
+    uz = 0.0
     for s in range(reach.shape[1]):
         if _reached(reach[c, s, 0], t_now, memory):
-            u[c, 0] += reach[c, s, 1]
-            u[c, 1] += reach[c, s, 2]
-            u[c, 2] += reach[c, s, 3]
+            ux += reach[c, s, 1]
+            uy += reach[c, s, 2]
+            uz += reach[c, s, 3]
+    u[c, 0] = ux
+    u[c, 1] = uy
+    u[c, 2] = uz
 
 
 @njit(cache=True, inline="always")
@@ -220,8 +223,10 @@ def _mark(
     n_normals,
     lower,
     h,
-    shape,
-    idx,
+    i,
+    j,
+    k,
+    cell,
     s,
     t_now,
     memory,
@@ -232,20 +237,19 @@ def _mark(
     touched,
     n_touched,
 ):
-    """Mark cell idx = (i, j, k) for source s at t_now with w_i(centre), the first n_normals
-    contact normals removed, and refresh u there (zero in solid cells). A deflected mark
-    (n_normals > 0) beats a free one within a step. A cell's first mark of the step goes
-    on the ``touched`` list (whose marks expire ``memory`` later); returns
+    """Mark cell (i, j, k) (id ``cell``) for source s at t_now with w_i(centre), the first
+    n_normals contact normals removed, and refresh u there (zero in solid cells). A
+    deflected mark (n_normals > 0) beats a free one within a step. A cell's first mark of
+    the step goes on the ``touched`` list (whose marks expire ``memory`` later); returns
     (touched, n_touched)."""
-    cell = (idx[0] * shape[1] + idx[1]) * shape[2] + idx[2]
     first = reach[cell, s, 0] != t_now
     if not first and n_normals == 0:
         # marked already this step: a free mark would repeat the same w_i(centre), and a
         # deflected one beats it
         return touched, n_touched
-    cx = lower[0] + (idx[0] + 0.5) * h
-    cy = lower[1] + (idx[1] + 0.5) * h
-    cz = lower[2] + (idx[2] + 0.5) * h
+    cx = lower[0] + (i + 0.5) * h
+    cy = lower[1] + (j + 0.5) * h
+    cz = lower[2] + (k + 0.5) * h
     primitive_velocity(kind, prm, cx, cy, cz, wc)
     for m in range(n_normals):
         # w <- w - (n . w) n for each surface hit so far in this step
@@ -263,6 +267,20 @@ def _mark(
         touched = _push(touched, n_touched, cell)
         n_touched += 1
     return touched, n_touched
+
+
+@njit(cache=True, inline="always")
+def _walk_axis(p, e, lower, h, n):
+    """One axis of the cell walk along p -> p + e: (inside, cell, step, t of the next
+    face, t per cell width), t being the fraction of the path."""
+    f = (p - lower) / h
+    inside = 0.0 <= f < n
+    cell = int(f)
+    step = 1 if e > 0 else -1
+    if e != 0.0:
+        face = (cell + (1 if e > 0 else 0)) * h + lower
+        return inside, cell, step, (face - p) / e, h / abs(e)
+    return inside, cell, step, np.inf, np.inf
 
 
 @njit(cache=True)
@@ -314,7 +332,8 @@ def trace_gusts(
     place (u only in the cells marked); ``touched`` collects the cells first marked this
     step (grown when full). Returns (touched, n_touched, crossings, n_alive).
     """
-    ny, nz = shape[1], shape[2]
+    nx, ny, nz = shape[0], shape[1], shape[2]
+    x0, y0, z0 = lower[0], lower[1], lower[2]
     n_touched = 0
     crossings = 0
     n_alive = 0
@@ -324,25 +343,17 @@ def trace_gusts(
     tmp_n = np.empty(3)
     scratch = np.empty((2, 3))
     normals = np.empty((max_hits, 3))
-    a = np.empty(3)
+    a = np.empty(3)  # the piece a -> b in one cell, for the collision tests
     b = np.empty(3)
-    p = np.empty(3)  # particle position
-    v = np.empty(3)  # its velocity (w_i, deflected after hits)
-    e = np.empty(3)  # this path: p -> p + e
-    cur = np.empty(3, dtype=np.int64)  # current cell
-    step = np.empty(3, dtype=np.int64)  # +-1 per axis
-    t_next = np.empty(3)  # path parameter of the next cell face per axis
-    t_cell = np.empty(3)  # path parameter per cell width per axis
     for q in range(n):
         s = sources[q]
         kind = kinds[s]
         prm = prims[s]
-        for ax in range(3):
-            p[ax] = positions[q, ax]
+        px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
         duration = dt if q < n_old else new_durations[q - n_old]
-        primitive_velocity(kind, prm, p[0], p[1], p[2], w)  # Euler: w_i(p_t)
+        primitive_velocity(kind, prm, px, py, pz, w)  # Euler: w_i(p_t)
         w2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
-        v[:] = w
+        vx, vy, vz = w[0], w[1], w[2]  # velocity (w_i, deflected after hits)
         remaining = duration
         n_hits = 0
         n_marks = 0  # hits whose normal the cell marks remove (see mark_mode)
@@ -350,36 +361,27 @@ def trace_gusts(
         stagnant = False
         moving = True
         while moving:
-            # one straight path p -> p + v * remaining, walked cell by cell (Amanatides-Woo)
+            # one straight path p -> p + e, e = v * remaining, walked cell by cell
+            # (Amanatides-Woo): cell (i, j, k), next face at path fraction t_next*
             moving = False
-            for ax in range(3):
-                e[ax] = v[ax] * remaining
-                f = (p[ax] - lower[ax]) / h
-                if not 0.0 <= f < shape[ax]:
-                    alive = False
-                cur[ax] = int(f)
-                step[ax] = 1 if e[ax] > 0 else -1
-                if e[ax] != 0.0:
-                    face = (cur[ax] + (1 if e[ax] > 0 else 0)) * h + lower[ax]
-                    t_next[ax] = (face - p[ax]) / e[ax]
-                    t_cell[ax] = h / abs(e[ax])
-                else:
-                    t_next[ax] = np.inf
-                    t_cell[ax] = np.inf
-            if not alive:
+            ex, ey, ez = vx * remaining, vy * remaining, vz * remaining
+            in_x, i, si, t_next_x, t_cell_x = _walk_axis(px, ex, x0, h, nx)
+            in_y, j, sj, t_next_y, t_cell_y = _walk_axis(py, ey, y0, h, ny)
+            in_z, k, sk, t_next_z, t_cell_z = _walk_axis(pz, ez, z0, h, nz)
+            if not (in_x and in_y and in_z):
+                alive = False
                 break
             t = 0.0
             while True:
-                t_exit = max(t, min(t_next[0], t_next[1], t_next[2], 1.0))
-                cell = (cur[0] * ny + cur[1]) * nz + cur[2]
+                t_exit = max(t, min(t_next_x, t_next_y, t_next_z, 1.0))
+                cell = (i * ny + j) * nz + k
                 best = 2.0
                 body_hit = False
                 obstacles = flags[cell] & (BODIES | TRIANGLES)
                 if obstacles:
                     # the piece a -> b lies in this cell: test what is registered here
-                    for ax in range(3):
-                        a[ax] = p[ax] + t * e[ax]
-                        b[ax] = p[ax] + t_exit * e[ax]
+                    a[0], a[1], a[2] = px + t * ex, py + t * ey, pz + t * ez
+                    b[0], b[1], b[2] = px + t_exit * ex, py + t_exit * ey, pz + t_exit * ez
                 if obstacles & BODIES:
                     for m in range(body_start[cell], body_start[cell + 1]):
                         bi = body_items[m]
@@ -422,7 +424,7 @@ def trace_gusts(
                             # the triangle's unit normal, turned to face the particle
                             tri_n = np.cross(vb - va, vc - va)
                             tri_n /= np.sqrt((tri_n * tri_n).sum())
-                            if tri_n[0] * e[0] + tri_n[1] * e[1] + tri_n[2] * e[2] > 0.0:
+                            if tri_n[0] * ex + tri_n[1] * ey + tri_n[2] * ez > 0.0:
                                 tri_n = -tri_n
                             hit_n[:] = tri_n
                 if best <= 1.0:
@@ -437,8 +439,10 @@ def trace_gusts(
                     n_marks,
                     lower,
                     h,
-                    shape,
-                    cur,
+                    i,
+                    j,
+                    k,
+                    cell,
                     s,
                     t_now,
                     memory,
@@ -453,13 +457,15 @@ def trace_gusts(
                 if best <= 1.0:
                     # stop on the surface, lose the normal component: w - (n . w) n
                     th = t + best * (t_exit - t)
-                    for ax in range(3):
-                        p[ax] += th * e[ax] + delta * hit_n[ax]
+                    px += th * ex + delta * hit_n[0]
+                    py += th * ey + delta * hit_n[1]
+                    pz += th * ez + delta * hit_n[2]
                     remaining *= 1.0 - th
-                    dn = v[0] * hit_n[0] + v[1] * hit_n[1] + v[2] * hit_n[2]
-                    for ax in range(3):
-                        v[ax] -= dn * hit_n[ax]
-                    if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= 1e-24 * w2:
+                    dn = vx * hit_n[0] + vy * hit_n[1] + vz * hit_n[2]
+                    vx -= dn * hit_n[0]
+                    vy -= dn * hit_n[1]
+                    vz -= dn * hit_n[2]
+                    if vx * vx + vy * vy + vz * vz <= 1e-24 * w2:
                         stagnant = True  # head-on: the gust stagnates at the wall
                         remaining = 0.0
                     elif n_hits >= max_hits:
@@ -469,25 +475,38 @@ def trace_gusts(
                     moving = True
                     break
                 if t_exit >= 1.0:
-                    for ax in range(3):
-                        p[ax] += e[ax]
+                    px += ex
+                    py += ey
+                    pz += ez
                     break
                 # into the next cell across the nearest face
-                ax = 0
-                if t_next[1] < t_next[ax]:
-                    ax = 1
-                if t_next[2] < t_next[ax]:
-                    ax = 2
-                cur[ax] += step[ax]
-                t = t_next[ax]
-                t_next[ax] += t_cell[ax]
-                if not 0 <= cur[ax] < shape[ax]:
+                if t_next_y < t_next_x:
+                    axis = 2 if t_next_z < t_next_y else 1
+                else:
+                    axis = 2 if t_next_z < t_next_x else 0
+                if axis == 0:
+                    i += si
+                    t = t_next_x
+                    t_next_x += t_cell_x
+                    inside = 0 <= i < nx
+                elif axis == 1:
+                    j += sj
+                    t = t_next_y
+                    t_next_y += t_cell_y
+                    inside = 0 <= j < ny
+                else:
+                    k += sk
+                    t = t_next_z
+                    t_next_z += t_cell_z
+                    inside = 0 <= k < nz
+                if not inside:
                     alive = False
                     break
         age = ages[q] + duration
         if alive and not stagnant and age <= max_age:
-            for ax in range(3):
-                positions[n_alive, ax] = p[ax]
+            positions[n_alive, 0] = px
+            positions[n_alive, 1] = py
+            positions[n_alive, 2] = pz
             sources[n_alive] = s
             ages[n_alive] = age
             n_alive += 1
