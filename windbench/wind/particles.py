@@ -76,7 +76,6 @@ from windbench.wind.primitives import parameter_table
 from windbench.wind.tracing import (
     BODIES,
     MARK_MODES,
-    ROW,
     SOLID,
     expire_cells,
     outside_bodies,
@@ -151,10 +150,14 @@ class ParticleWind(WindField):
         self._carry = np.zeros(n_sources)
         self._counter = np.zeros(n_sources, dtype=np.int64)
         self._blocks = [{} for _ in range(n_sources)]  # each source's current sample block
-        # per (cell, source): [t, ux, uy, uz] of the last mark; t = -inf: never reached
-        self._reach = np.zeros((grid.n_cells, max(n_sources, 1), ROW))
-        self._reach[:, :, 0] = -np.inf
+        # per (cell, source): time of the last mark (-inf: never) and the value it left;
+        # with one source the values are u itself (u = the value while it is reached)
+        self._marked = np.full((grid.n_cells, max(n_sources, 1)), -np.inf)
         self._u = np.zeros((grid.n_cells, 3))
+        if n_sources == 1:
+            self._values = self._u.reshape(grid.n_cells, 1, 3)
+        else:
+            self._values = np.zeros((grid.n_cells, max(n_sources, 1), 3))
         # per cell: SOLID (centre in a body), BODIES (bodies registered), TRIANGLES (cloth)
         self._flags = np.zeros(grid.n_cells, dtype=np.uint8)
         self._flags[self.solid_mask().reshape(-1)] |= SOLID
@@ -250,7 +253,8 @@ class ParticleWind(WindField):
             self._pos,
             self._src,
             self._age,
-            self._reach,
+            self._marked,
+            self._values,
             self._u,
             self._touched,
         )
@@ -302,7 +306,9 @@ class ParticleWind(WindField):
             self._history and self.time - self._history[0][0] > self._memory * (1 + 1e-12) + 1e-12
         ):
             t_mark, cells = self._history.popleft()
-            expire_cells(cells, t_mark, self._reach, self._flags, self.time, self._memory, self._u)
+            expire_cells(
+                cells, t_mark, self._marked, self._values, self._flags, self.time, self._memory, self._u
+            )
 
     # ---------------------------------------------------------------- queries
     def velocity(self) -> np.ndarray:
@@ -316,13 +322,13 @@ class ParticleWind(WindField):
 
     def reached(self) -> np.ndarray:
         """``(n_sources, nx, ny, nz)`` bool: cells each source reached within ``memory``."""
-        out = np.zeros(self._reach.shape[:2], dtype=np.bool_)
-        reached_sources(self._reach, self.time, self._memory, out)
-        return out.T.reshape(self._reach.shape[1], *self.grid.shape)[: len(self.scene.sources)]
+        out = np.zeros(self._marked.shape, dtype=np.bool_)
+        reached_sources(self._marked, self.time, self._memory, out)
+        return out.T.reshape(self._marked.shape[1], *self.grid.shape)[: len(self.scene.sources)]
 
     def ever_reached(self) -> np.ndarray:
         """``(nx, ny, nz)`` bool: cells any particle has marked since the start."""
-        return np.isfinite(self._reach[:, :, 0]).any(axis=1).reshape(self.grid.shape)
+        return np.isfinite(self._marked).any(axis=1).reshape(self.grid.shape)
 
     @property
     def particles(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -40,7 +40,6 @@ from windbench.geometry.bodies import body_distance, union_distance_point
 from windbench.geometry.raster import segment_triangle
 from windbench.wind.primitives import primitive_velocity
 
-ROW = 4  # t, ux, uy, uz
 SOLID, BODIES, TRIANGLES = 1, 2, 4  # bits of the per-cell flags
 MARK_NONE, MARK_BODIES, MARK_ALL = 0, 1, 2  # which hits make the marks "deflected"
 MARK_MODES = {"none": MARK_NONE, "bodies": MARK_BODIES, "all": MARK_ALL}
@@ -200,16 +199,16 @@ def _reached(t_cell, t_now, memory):
 
 
 @njit(cache=True, inline="always")
-def _assemble_cell(c, reach, t_now, memory, u):
+def _assemble_cell(c, marked, values, t_now, memory, u):
     """u[c] = sum of the values of the sources that reached cell c within memory."""
     ux = 0.0
     uy = 0.0
     uz = 0.0
-    for s in range(reach.shape[1]):
-        if _reached(reach[c, s, 0], t_now, memory):
-            ux += reach[c, s, 1]
-            uy += reach[c, s, 2]
-            uz += reach[c, s, 3]
+    for s in range(marked.shape[1]):
+        if _reached(marked[c, s], t_now, memory):
+            ux += values[c, s, 0]
+            uy += values[c, s, 1]
+            uz += values[c, s, 2]
     u[c, 0] = ux
     u[c, 1] = uy
     u[c, 2] = uz
@@ -231,18 +230,19 @@ def _mark(
     t_now,
     memory,
     flags,
-    reach,
+    marked,
+    values,
     u,
     wc,
     touched,
     n_touched,
 ):
     """Mark cell (i, j, k) (id ``cell``) for source s at t_now with w_i(centre), the first
-    n_normals contact normals removed, and refresh u there (zero in solid cells). A
-    deflected mark (n_normals > 0) beats a free one within a step. A cell's first mark of
-    the step goes on the ``touched`` list (whose marks expire ``memory`` later); returns
-    (touched, n_touched)."""
-    first = reach[cell, s, 0] != t_now
+    n_normals contact normals removed, and refresh u there (in air cells only: a solid
+    cell keeps u = 0 and its value is not stored). A deflected mark (n_normals > 0) beats
+    a free one within a step. A cell's first mark of the step goes on the ``touched`` list
+    (whose marks expire ``memory`` later); returns (touched, n_touched)."""
+    first = marked[cell, s] != t_now
     if not first and n_normals == 0:
         # marked already this step: a free mark would repeat the same w_i(centre), and a
         # deflected one beats it
@@ -257,12 +257,12 @@ def _mark(
         wc[0] -= dn * normals[m, 0]
         wc[1] -= dn * normals[m, 1]
         wc[2] -= dn * normals[m, 2]
-    reach[cell, s, 0] = t_now
-    reach[cell, s, 1] = wc[0]
-    reach[cell, s, 2] = wc[1]
-    reach[cell, s, 3] = wc[2]
+    marked[cell, s] = t_now
     if not flags[cell] & SOLID:
-        _assemble_cell(cell, reach, t_now, memory, u)
+        values[cell, s, 0] = wc[0]
+        values[cell, s, 1] = wc[1]
+        values[cell, s, 2] = wc[2]
+        _assemble_cell(cell, marked, values, t_now, memory, u)
     if first:
         touched = _push(touched, n_touched, cell)
         n_touched += 1
@@ -314,7 +314,8 @@ def trace_gusts(
     positions,
     sources,
     ages,
-    reach,
+    marked,
+    values,
     u,
     touched,
 ):
@@ -328,9 +329,11 @@ def trace_gusts(
     there is something to test; the triangles of a flagged cell are
     ``tri_items[tri_start[tri_slot[cell]] : tri_start[tri_slot[cell] + 1]]``.
     ``tri_bounds`` (m, 2, 3) are the triangles' bounding boxes (min, max): a cheap test
-    before Möller-Trumbore. ``reach`` (n_cells, n_sources, ROW) and ``u`` are updated in
-    place (u only in the cells marked); ``touched`` collects the cells first marked this
-    step (grown when full). Returns (touched, n_touched, crossings, n_alive).
+    before Möller-Trumbore. ``marked`` (n_cells, n_sources: time of the last mark),
+    ``values`` (n_cells, n_sources, 3: the value it left) and ``u`` are updated in place in
+    the cells marked only; ``values`` may be ``u`` itself (one source: u is the value
+    while reached). ``touched`` collects the cells first marked this step (grown when
+    full). Returns (touched, n_touched, crossings, n_alive).
     """
     nx, ny, nz = shape[0], shape[1], shape[2]
     x0, y0, z0 = lower[0], lower[1], lower[2]
@@ -447,7 +450,8 @@ def trace_gusts(
                     t_now,
                     memory,
                     flags,
-                    reach,
+                    marked,
+                    values,
                     u,
                     wc,
                     touched,
@@ -514,7 +518,7 @@ def trace_gusts(
 
 
 @njit(cache=True)
-def expire_cells(cells, t_mark, reach, flags, t_now, memory, u):
+def expire_cells(cells, t_mark, marked, values, flags, t_now, memory, u):
     """Refresh u in the cells marked at t_mark whose mark has just expired.
 
     A cell of the list whose marks of t_mark have all been renewed since keeps its u
@@ -524,9 +528,9 @@ def expire_cells(cells, t_mark, reach, flags, t_now, memory, u):
         c = cells[m]
         if flags[c] & SOLID:
             continue
-        for s in range(reach.shape[1]):
-            if reach[c, s, 0] == t_mark:
-                _assemble_cell(c, reach, t_now, memory, u)
+        for s in range(marked.shape[1]):
+            if marked[c, s] == t_mark:
+                _assemble_cell(c, marked, values, t_now, memory, u)
                 break
 
 
@@ -577,11 +581,11 @@ def sort_by_cell(n, lower, h, shape, positions, sources, ages):
 
 
 @njit(cache=True)
-def reached_sources(reach, t_now, memory, out):
+def reached_sources(marked, t_now, memory, out):
     """out[c, s] = whether source s reached cell c within the last ``memory`` seconds."""
-    for c in range(reach.shape[0]):
-        for s in range(reach.shape[1]):
-            out[c, s] = _reached(reach[c, s, 0], t_now, memory)
+    for c in range(marked.shape[0]):
+        for s in range(marked.shape[1]):
+            out[c, s] = _reached(marked[c, s], t_now, memory)
 
 
 @njit(cache=True)
