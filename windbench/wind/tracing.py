@@ -34,7 +34,10 @@ is bit-for-bit reproducible.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from windbench.geometry.bodies import body_distance, union_distance_point
 from windbench.geometry.raster import segment_triangle
@@ -44,6 +47,7 @@ SOLID, BODIES, TRIANGLES = 1, 2, 4  # bits of the per-cell flags
 MARK_NONE, MARK_BODIES, MARK_ALL = 0, 1, 2  # which hits make the marks "deflected"
 MARK_MODES = {"none": MARK_NONE, "bodies": MARK_BODIES, "all": MARK_ALL}
 ROOT_ITERATIONS = 60
+AHEAD = 8  # particles between a particle's prefetch and its tracing
 RADIX_BITS = 11  # bits of the cell id sorted per pass of sort_by_cell
 RADIX = 1 << RADIX_BITS
 
@@ -269,6 +273,42 @@ def _mark(
     return touched, n_touched
 
 
+@intrinsic
+def _prefetch(typingctx, arr, i, j):
+    """Hint the CPU to fetch the cache line of ``arr[i, j]`` for writing (llvm.prefetch):
+    no effect on results, only on when memory is read."""
+    sig = types.void(arr, i, j)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(
+            context, builder, aryty, ary, [args[1], args[2]], wraparound=False
+        )
+        i8p = builder.bitcast(ptr, ir.IntType(8).as_pointer())
+        i32 = ir.IntType(32)
+        fnty = ir.FunctionType(ir.VoidType(), [i8p.type, i32, i32, i32])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0i8")
+        builder.call(fn, [i8p, i32(1), i32(3), i32(1)])  # write, keep in cache, data
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@njit(cache=True, inline="always")
+def _look_ahead(px, py, pz, w, tau, lower, h, shape, s, marked, u):
+    """Prefetch the cell state at the start, middle and end of the path p -> p + w tau of
+    a particle traced a few places later (the cells it will most likely mark)."""
+    for f in (0.0, 0.5, 1.0):
+        i = int(np.floor((px + f * tau * w[0] - lower[0]) / h))
+        j = int(np.floor((py + f * tau * w[1] - lower[1]) / h))
+        k = int(np.floor((pz + f * tau * w[2] - lower[2]) / h))
+        if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
+            c = (i * shape[1] + j) * shape[2] + k
+            _prefetch(marked, c, s)
+            _prefetch(u, c, 0)
+
+
 @njit(cache=True, inline="always")
 def _walk_axis(p, e, lower, h, n):
     """One axis of the cell walk along p -> p + e: (inside, cell, step, t of the next
@@ -340,7 +380,6 @@ def trace_gusts(
     n_touched = 0
     crossings = 0
     n_alive = 0
-    w = np.empty(3)
     wc = np.empty(3)
     hit_n = np.empty(3)
     tmp_n = np.empty(3)
@@ -348,15 +387,39 @@ def trace_gusts(
     normals = np.empty((max_hits, 3))
     a = np.empty(3)  # the piece a -> b in one cell, for the collision tests
     b = np.empty(3)
-    for q in range(n):
-        s = sources[q]
+    ahead = np.empty((AHEAD, 3))  # w_i(p) of the next AHEAD particles, slot q % AHEAD
+    for q in range(-AHEAD, n):
+        qa = q + AHEAD
+        if q >= 0:
+            s = sources[q]
+            px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
+            vx, vy, vz = ahead[q % AHEAD, 0], ahead[q % AHEAD, 1], ahead[q % AHEAD, 2]
+        if qa < n:
+            # Euler: w_i(p_t), evaluated AHEAD particles early, and its cells prefetched
+            sa = sources[qa]
+            w = ahead[qa % AHEAD]
+            primitive_velocity(
+                kinds[sa], prims[sa], positions[qa, 0], positions[qa, 1], positions[qa, 2], w
+            )
+            _look_ahead(
+                positions[qa, 0],
+                positions[qa, 1],
+                positions[qa, 2],
+                w,
+                dt,
+                lower,
+                h,
+                shape,
+                sa,
+                marked,
+                u,
+            )
+        if q < 0:
+            continue
         kind = kinds[s]
         prm = prims[s]
-        px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
         duration = dt if q < n_old else new_durations[q - n_old]
-        primitive_velocity(kind, prm, px, py, pz, w)  # Euler: w_i(p_t)
-        w2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
-        vx, vy, vz = w[0], w[1], w[2]  # velocity (w_i, deflected after hits)
+        w2 = vx * vx + vy * vy + vz * vz  # velocity v: w_i, deflected after hits
         remaining = duration
         n_hits = 0
         n_marks = 0  # hits whose normal the cell marks remove (see mark_mode)
