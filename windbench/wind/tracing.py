@@ -588,6 +588,8 @@ def expire_cells(cells, t_mark, marked, values, flags, t_now, memory, u):
     (nothing about it changed); the others get u = sum of the still-reached sources.
     """
     for m in range(cells.shape[0]):
+        if m + AHEAD < cells.shape[0]:
+            _prefetch(marked, cells[m + AHEAD], 0)
         c = cells[m]
         if flags[c] & SOLID:
             continue
