@@ -88,6 +88,7 @@ from windbench.wind.tracing import (
 
 CONTACT_OFFSET = 1e-6  # particles rest this many cell widths outside a surface they hit
 SORT_EVERY = 8  # steps between reorderings of the particles by cell (memory locality)
+PREFETCH_CELLS = 1 << 16  # grids this large (cell state > 2 MB) prefetch ahead of tracing
 
 
 def _check(params) -> None:
@@ -137,6 +138,7 @@ class ParticleWind(WindField):
         self._max_age = float(params.max_age)
         self._max_hits = int(params.max_hits)
         self._mark_mode = MARK_MODES[params.deflected_cells]
+        self._prefetch = grid.n_cells >= PREFETCH_CELLS
         self._seed = int(params.seed)
         # state
         n_sources = len(scene.sources)
@@ -250,6 +252,7 @@ class ParticleWind(WindField):
             CONTACT_OFFSET * self._h,
             self._max_hits,
             self._mark_mode,
+            self._prefetch,
             self._pos,
             self._src,
             self._age,
@@ -307,7 +310,14 @@ class ParticleWind(WindField):
         ):
             t_mark, cells = self._history.popleft()
             expire_cells(
-                cells, t_mark, self._marked, self._values, self._flags, self.time, self._memory, self._u
+                cells,
+                t_mark,
+                self._marked,
+                self._values,
+                self._flags,
+                self.time,
+                self._memory,
+                self._u,
             )
 
     # ---------------------------------------------------------------- queries

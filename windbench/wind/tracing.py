@@ -299,10 +299,11 @@ def _prefetch(typingctx, arr, i, j):
 def _look_ahead(px, py, pz, w, tau, lower, h, shape, s, marked, u):
     """Prefetch the cell state at the start, middle and end of the path p -> p + w tau of
     a particle traced a few places later (the cells it will most likely mark)."""
-    for f in (0.0, 0.5, 1.0):
-        i = int(np.floor((px + f * tau * w[0] - lower[0]) / h))
-        j = int(np.floor((py + f * tau * w[1] - lower[1]) / h))
-        k = int(np.floor((pz + f * tau * w[2] - lower[2]) / h))
+    inv_h = 1.0 / h
+    for f in (0.0, 0.5 * tau, tau):
+        i = int(np.floor((px + f * w[0] - lower[0]) * inv_h))
+        j = int(np.floor((py + f * w[1] - lower[1]) * inv_h))
+        k = int(np.floor((pz + f * w[2] - lower[2]) * inv_h))
         if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
             c = (i * shape[1] + j) * shape[2] + k
             _prefetch(marked, c, s)
@@ -351,6 +352,7 @@ def trace_gusts(
     delta,
     max_hits,
     mark_mode,
+    prefetch,
     positions,
     sources,
     ages,
@@ -401,19 +403,20 @@ def trace_gusts(
             primitive_velocity(
                 kinds[sa], prims[sa], positions[qa, 0], positions[qa, 1], positions[qa, 2], w
             )
-            _look_ahead(
-                positions[qa, 0],
-                positions[qa, 1],
-                positions[qa, 2],
-                w,
-                dt,
-                lower,
-                h,
-                shape,
-                sa,
-                marked,
-                u,
-            )
+            if prefetch:
+                _look_ahead(
+                    positions[qa, 0],
+                    positions[qa, 1],
+                    positions[qa, 2],
+                    w,
+                    dt,
+                    lower,
+                    h,
+                    shape,
+                    sa,
+                    marked,
+                    u,
+                )
         if q < 0:
             continue
         kind = kinds[s]
