@@ -177,6 +177,46 @@ def test_without_obstacles_the_field_is_the_global_one_where_particles_arrived()
     assert np.all(wind.velocity()[none] == 0.0)
 
 
+def test_field_kept_at_the_marks_equals_the_field_rebuilt_from_them():
+    """u is refreshed only where marks are made or lapse; at every step it must equal
+    sum_s [s reached the cell within memory] w_s(centre), rebuilt over the whole grid.
+    Two gusty sources make cells where one, both or neither count; 64 x 32 x 32 cells
+    take the prefetching path of the tracing kernel."""
+    scene = scene_of(
+        [
+            {
+                "type": "uniform",
+                "velocity": [6.0, 1.0, 0.0],
+                "gusts": {"on": 0.1, "off": 0.1},
+                "emit": {"rate": 3000.0},
+            },
+            {
+                "type": "vortex",
+                "center": [2.0, 1.0, 0.0],
+                "strength": 4.0,
+                "core_radius": 0.2,
+                "gusts": {"on": 0.15, "off": 0.05, "start": 0.05},
+                "emit": {"rate": 3000.0},
+            },
+        ]
+    )
+    grid = Grid.from_domain(scene.lower, scene.upper, 64)
+    assert grid.n_cells >= 1 << 16
+    centres = grid.cell_centres().reshape(-1, 3)
+    w = [src(centres).reshape(*grid.shape, 3) for src in scene.sources]
+    seen = {"partial": 0, "lapsed": 0}
+
+    def check(wind):
+        reached = wind.reached()
+        rebuilt = sum(np.where(r[..., None], ws, 0.0) for r, ws in zip(reached, w, strict=True))
+        np.testing.assert_allclose(wind.velocity(), rebuilt, rtol=0, atol=1e-12)
+        seen["partial"] += int((reached.any(axis=0) & ~reached.all(axis=0)).sum() > 0)
+        seen["lapsed"] += int((wind.ever_reached() & ~reached.any(axis=0)).sum() > 0)
+
+    advance(ParticleWind(scene, grid, params("wind.memory=0.05")), 0.4, each=check)
+    assert seen["partial"] > 5 and seen["lapsed"] > 5
+
+
 def test_a_gust_passes_and_memory_forgets_it():
     """On for 0.3 s: the windy band runs downstream at U; cells are calm memory after it."""
     U, memory = 6.0, 0.1

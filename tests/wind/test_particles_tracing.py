@@ -11,11 +11,12 @@ from hypothesis import strategies as st
 
 from windbench.cli import compose_config
 from windbench.geometry.bodies import BOX, CAPSULE, CYLINDER, PLANE
+from windbench.geometry.raster import occupied_cells, triangle_cells
 from windbench.grid import Grid
 from windbench.scenes import build_scene
 from windbench.wind.base import Obstacles
 from windbench.wind.particles import ParticleWind
-from windbench.wind.tracing import convex_first_hit
+from windbench.wind.tracing import TRIANGLES, convex_first_hit, sort_by_cell
 
 
 @pytest.fixture(scope="module")
@@ -232,3 +233,45 @@ def test_cloth_triangle_deflects_and_shadows(mode, deflected):
     assert pos @ [1, 0, 1] < 2.5
     u = wind.velocity()[tuple(grid.cell_index(pos)[0])]
     np.testing.assert_allclose(u, [0.5, 0.0, -0.5] if deflected else [1.0, 0.0, 0.0])
+
+
+def test_a_moved_cloth_no_longer_blocks_its_old_cells(particle_params):
+    """The cells a triangle overlapped last step are cleared: after the sheet moves away
+    downstream, a particle crosses its old place on the free Euler path, and the cells
+    flagged for tests are those of the moved sheet alone."""
+    scene = _scene([{"type": "uniform", "velocity": [1.0, 0.0, 0.0]}])
+    wind, grid = _wind(scene, 16, particle_params)
+    sheet = np.array([[2.1, -1.0, -1.0], [2.1, 3.0, -1.0], [2.1, 1.0, 3.0]])  # plane x = 2.1
+    tris = np.array([[0, 1, 2]])
+    wind.add_particles([[1.0, 0.5, 0.5]], [0])
+    wind.step(1.5, Obstacles((), sheet, np.zeros_like(sheet), tris))
+    assert len(wind.particles[0]) == 0  # head-on at x = 2.1: stagnated
+    assert not wind.ever_reached()[grid.cell_index([[2.26, 0.5, 0.5]])[0][0] :].any()
+    moved = sheet + [1.6, 0.0, 0.0]  # now at x = 3.7
+    wind.add_particles([[1.0, 0.7, 0.3]], [0])
+    wind.step(1.5, Obstacles((), moved, np.zeros_like(moved), tris))
+    np.testing.assert_allclose(wind.particles[0][0], [2.5, 0.7, 0.3], atol=1e-12)  # free
+    # the cells flagged are exactly those the grid-wide registration gives the moved sheet
+    flagged = (wind._flags & TRIANGLES).astype(bool).reshape(grid.shape)
+    np.testing.assert_array_equal(
+        flagged, occupied_cells(triangle_cells(moved, tris, grid)[0], grid.shape)
+    )
+
+
+def test_sort_by_cell_is_a_stable_sort_by_cell_id():
+    """Against numpy's stable argsort of c = (i ny + j) nz + k; 24000 cells take two radix
+    passes; the buffer beyond the first n particles is left alone."""
+    rng = np.random.default_rng(5)
+    lower, h, shape = np.array([-1.0, 0.0, 2.0]), 0.25, np.array([40, 30, 20])
+    n = 5000
+    pos = lower + rng.random((n + 7, 3)) * (shape * h)
+    pos[:50] = pos[50:100]  # equal cells: order must be kept
+    src, ages = rng.integers(0, 3, n + 7), rng.random(n + 7)
+    idx = np.floor((pos[:n] - lower) / h).astype(int)
+    order = np.argsort((idx[:, 0] * 30 + idx[:, 1]) * 20 + idx[:, 2], kind="stable")
+    expected = pos[order], src[order], ages[order], pos[n:].copy()
+    sort_by_cell(n, lower, h, shape, pos, src, ages)
+    np.testing.assert_array_equal(pos[:n], expected[0])
+    np.testing.assert_array_equal(src[:n], expected[1])
+    np.testing.assert_array_equal(ages[:n], expected[2])
+    np.testing.assert_array_equal(pos[n:], expected[3])
