@@ -138,17 +138,19 @@ class Emitter:
             )
         # FACES: u0 picks the face (by cumulative weight) and its first coordinate
         rows = self.geometry[0]
-        cum = np.concatenate([[0.0], np.cumsum(rows[:, 6])])
-        cum /= cum[-1]
-        face = np.clip(np.searchsorted(cum, u[:, 0], side="right") - 1, 0, len(rows) - 1)
-        f0 = (u[:, 0] - cum[face]) / (cum[face + 1] - cum[face])
-        for idx, row in enumerate(rows):
-            sel = face == idx
-            axis = int(row[0])
-            a, b = (axis + 1) % 3, (axis + 2) % 3
-            out[sel, axis] = row[1]
-            out[sel, a] = row[2] + f0[sel] * (row[3] - row[2])
-            out[sel, b] = row[4] + u[sel, 1] * (row[5] - row[4])
+        if len(rows) == 1:
+            row, f0 = rows[np.zeros(n, dtype=np.int64)], u[:, 0]
+        else:
+            cum = np.concatenate([[0.0], np.cumsum(rows[:, 6])])
+            cum /= cum[-1]
+            face = np.clip(np.searchsorted(cum, u[:, 0], side="right") - 1, 0, len(rows) - 1)
+            f0 = (u[:, 0] - cum[face]) / (cum[face + 1] - cum[face])
+            row = rows[face]
+        axis = row[:, 0].astype(np.int64)
+        at = np.arange(n)
+        out[at, axis] = row[:, 1]
+        out[at, (axis + 1) % 3] = row[:, 2] + f0 * (row[:, 3] - row[:, 2])
+        out[at, (axis + 2) % 3] = row[:, 4] + u[:, 1] * (row[:, 5] - row[:, 4])
         return out
 
     @property
