@@ -77,8 +77,8 @@ from windbench.wind.tracing import (
     BODIES,
     MARK_MODES,
     SOLID,
+    admit_particles,
     expire_cells,
-    outside_bodies,
     reached_sources,
     register_bodies,
     register_cloth,
@@ -172,8 +172,12 @@ class ParticleWind(WindField):
         self._stats: dict[str, float] = {}
 
     # ---------------------------------------------------------------- emission
-    def _emit(self, t0: float, t1: float):
-        """New particles of all sources in [t0, t1): positions, sources, durations."""
+    def _emit(self, t0: float, t1: float) -> np.ndarray:
+        """Append the new particles of all sources in [t0, t1); their durations in the step.
+
+        Candidates outside the grid's half-open box or inside a rigid body are dropped, and
+        so is what exceeds ``max_particles``.
+        """
         pos, src, dur = [], [], []
         for e in self.emitters:
             p, instants, carry, counter = e.emit(
@@ -185,19 +189,35 @@ class ParticleWind(WindField):
             dur.append(t1 - instants)
         if not pos:
             self._stats["dropped_particles"] = 0.0
-            return np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0)
-        pos, src, dur = np.concatenate(pos), np.concatenate(src), np.concatenate(dur)
-        keep = np.all((pos >= self._lower) & (pos < self._upper), axis=1)  # half-open box
-        if self.scene.bodies:
-            outside_bodies(self._body_kinds, self._body_params, pos, keep)
-        room = self._capacity - self._n
-        idx = np.flatnonzero(keep)[: max(room, 0)]
-        self._stats["dropped_particles"] = float(len(keep) - len(idx))
-        return pos[idx], src[idx], dur[idx]
+            return np.zeros(0)
+        if len(pos) > 1:
+            pos, src, dur = np.concatenate(pos), np.concatenate(src), np.concatenate(dur)
+        else:
+            pos, src, dur = pos[0], src[0], dur[0]
+        self._reserve(len(pos))
+        durations = np.empty(len(pos))
+        m = admit_particles(
+            pos,
+            src,
+            dur,
+            self._lower,
+            self._upper,
+            self._body_kinds,
+            self._body_params,
+            max(self._capacity - self._n, 0),
+            self._n,
+            self._pos,
+            self._src,
+            self._age,
+            durations,
+        )
+        self._n += m
+        self._stats["dropped_particles"] = float(len(pos) - m)
+        return durations[:m]
 
-    def _append(self, positions: np.ndarray, sources: np.ndarray) -> None:
-        """Put particles (age 0) after the live ones, growing the buffers when full."""
-        n, k = self._n, len(positions)
+    def _reserve(self, k: int) -> None:
+        """Grow the particle buffers (doubling) so that k more fit after the live ones."""
+        n = self._n
         if n + k > len(self._pos):
             size = max(n + k, 2 * len(self._pos), 1024)
             for name in ("_pos", "_src", "_age"):
@@ -205,23 +225,23 @@ class ParticleWind(WindField):
                 grown = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
                 grown[:n] = old[:n]
                 setattr(self, name, grown)
-        self._pos[n : n + k] = positions
-        self._src[n : n + k] = sources
-        self._age[n : n + k] = 0.0
-        self._n = n + k
 
     def add_particles(self, positions, sources):
         """Insert particles (tests, benchmarks); the next step traces them for its full dt."""
         positions = np.atleast_2d(np.asarray(positions, dtype=np.float64))
-        self._append(positions, np.asarray(sources, dtype=np.int64))
+        n, k = self._n, len(positions)
+        self._reserve(k)
+        self._pos[n : n + k] = positions
+        self._src[n : n + k] = np.asarray(sources, dtype=np.int64)
+        self._age[n : n + k] = 0.0
+        self._n = n + k
 
     # ---------------------------------------------------------------- step
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
         t_start, t_end = self.time, self.time + dt
         n_old = self._n
-        new_pos, new_src, new_dur = self._emit(t_start, t_end)
-        self._append(new_pos, new_src)
+        new_dur = self._emit(t_start, t_end)
         t1 = time.perf_counter()
         tri_slot, tri_start, tri_items, tri_bounds = self._register_cloth(obstacles)
         n_traced = self._n
@@ -229,7 +249,7 @@ class ParticleWind(WindField):
             n_traced,
             n_old,
             dt,
-            np.ascontiguousarray(new_dur),
+            new_dur,
             self._max_age,
             self._kinds,
             self._prims,
@@ -271,7 +291,7 @@ class ParticleWind(WindField):
         trace = t2 - t1
         self._stats.update(
             live_particles=float(self._n),
-            emitted_particles=float(len(new_pos)),
+            emitted_particles=float(len(new_dur)),
             cell_crossings=float(crossings),
             particle_steps_per_second=n_traced / trace if trace > 0 else 0.0,
             emit_seconds=t1 - t0,

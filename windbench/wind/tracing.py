@@ -501,28 +501,30 @@ def trace_gusts(
                     if mark_mode == MARK_ALL or (mark_mode == MARK_BODIES and body_hit):
                         normals[n_marks] = hit_n
                         n_marks += 1
-                touched, n_touched = _mark(
-                    kind,
-                    prm,
-                    normals,
-                    n_marks,
-                    lower,
-                    h,
-                    i,
-                    j,
-                    k,
-                    cell,
-                    s,
-                    t_now,
-                    memory,
-                    flags,
-                    marked,
-                    values,
-                    u,
-                    wc,
-                    touched,
-                    n_touched,
-                )
+                if marked[cell, s] != t_now or n_marks > 0:
+                    # (a free mark repeated within the step changes nothing)
+                    touched, n_touched = _mark(
+                        kind,
+                        prm,
+                        normals,
+                        n_marks,
+                        lower,
+                        h,
+                        i,
+                        j,
+                        k,
+                        cell,
+                        s,
+                        t_now,
+                        memory,
+                        flags,
+                        marked,
+                        values,
+                        u,
+                        wc,
+                        touched,
+                        n_touched,
+                    )
                 crossings += 1
                 if best <= 1.0:
                     # stop on the surface, lose the normal component: w - (n . w) n
@@ -657,12 +659,37 @@ def reached_sources(marked, t_now, memory, out):
 
 
 @njit(cache=True)
-def outside_bodies(kinds, params, points, keep):
-    """keep[p] &= points[p] lies outside every body (serial: emission batches are small)."""
+def admit_particles(
+    candidates,
+    candidate_sources,
+    candidate_durations,
+    lower,
+    upper,
+    kinds,
+    params,
+    room,
+    n,
+    positions,
+    sources,
+    ages,
+    durations,
+):
+    """Append the candidates that lie in the grid's half-open box [lower, upper) and outside
+    every body, in order, at most ``room`` of them, after particle n - 1 (age 0; their
+    durations compacted into ``durations``). Returns how many were admitted."""
     normal = np.empty(3)
-    for p in range(points.shape[0]):
-        if keep[p]:
-            d = union_distance_point(
-                kinds, params, points[p, 0], points[p, 1], points[p, 2], normal
-            )
-            keep[p] = d >= 0.0
+    m = 0
+    for p in range(candidates.shape[0]):
+        if m == room:
+            break
+        x, y, z = candidates[p, 0], candidates[p, 1], candidates[p, 2]
+        if not (lower[0] <= x < upper[0] and lower[1] <= y < upper[1] and lower[2] <= z < upper[2]):
+            continue
+        if kinds.shape[0] and union_distance_point(kinds, params, x, y, z, normal) < 0.0:
+            continue
+        positions[n + m, 0], positions[n + m, 1], positions[n + m, 2] = x, y, z
+        sources[n + m] = candidate_sources[p]
+        ages[n + m] = 0.0
+        durations[m] = candidate_durations[p]
+        m += 1
+    return m
