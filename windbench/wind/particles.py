@@ -40,10 +40,14 @@ Choices the paper leaves open (written down here):
   w_i vanishes inside the core) until ``max_age``.
 - *Order and cost.* Tracing runs serially over the particles in their stored order (so
   the "later mark wins" rule is deterministic); every ``SORT_EVERY`` steps the particles
-  are reordered by cell (stable sort) so that the walk through the cell arrays is
-  sequential in memory. Cost per step: O(particles x cells crossed) for emission, tracing,
-  collision tests (only what is registered in each crossed cell) and the field update
-  (only the cells marked this step and those whose marks just expired are recomputed).
+  are reordered by cell (stable O(n) radix sort) so that the walk through the cell
+  arrays is sequential in memory. Cost per step: O(particles x cells crossed) for
+  emission, tracing, collision tests (only what is registered in each crossed cell,
+  found through per-cell flags; cloth triangles registered in O(overlaps)) and the field
+  update (u is refreshed in the cells whose marks change and in those whose marks lapse
+  ``memory`` later); nothing per step is O(cells). On grids of ``PREFETCH_CELLS`` cells
+  and more the tracing prefetches the cell state a few particles ahead. Measured
+  figures: ``experiments/README.md`` (``scaling_particles``, ``bench_particles.py``).
 - *Domain faces.* Particles leave through every face and die (the field outside the grid
   is not kept); boundary kinds (slip, periodic, ...) do not steer them.
 - *Thin poles* (``resolve: false``) are obstacles like other bodies.

@@ -19,16 +19,26 @@ convex function along a piece; :func:`convex_first_hit` finds the first root of 
 (to round-off) without marching, also for thin poles (``resolve: false`` bodies are
 obstacles like any other; their lee is thinner than a cell and mostly invisible on the grid).
 
-Cell state per (cell, source) is one row ``[t, deflected, ux, uy, uz]``: when the source's
-particles last reached the cell, whether that mark was a deflected one, and the value it
-left. Choice (documented in :mod:`windbench.wind.particles`): a free particle leaves w_i
-at the cell centre, so with no obstacles the field equals the ``global`` backend's
-exactly. After a hit, ``mark_mode`` says which contact normals the particle's later marks
-in this step remove from w_i(centre) (the paper's u(p_col) . n_obj = 0): those of every
-hit (``all``), of rigid bodies only (``bodies``) or none. Within one step a deflected mark
-beats a free one (the no-penetration condition wins at the surface); otherwise the later
-mark wins. The kernels run serially over the particles in their stored order, so a run
-is bit-for-bit reproducible.
+Cell state per (cell, source): ``marked[c, s]``, the time the source's particles last
+reached the cell (-inf: never), and ``values[c, s]``, the value that mark left (with one
+source, ``values`` is u itself: u is that value while it counts). Choice (documented in
+:mod:`windbench.wind.particles`): a free particle leaves w_i at the cell centre, so with
+no obstacles the field equals the ``global`` backend's exactly. After a hit,
+``mark_mode`` says which contact normals the particle's later marks in this step remove
+from w_i(centre) (the paper's u(p_col) . n_obj = 0): those of every hit (``all``), of
+rigid bodies only (``bodies``) or none. Within one step a deflected mark beats a free one
+(the no-penetration condition wins at the surface); otherwise the later mark wins. The
+kernels run serially over the particles in their stored order, so a run is bit-for-bit
+reproducible.
+
+Cost per step, none of it a pass over the grid: u is refreshed in a cell when a mark
+there changes (:func:`_mark`) and when its last marks lapse ``memory`` later
+(:func:`expire_cells`, over the cells first marked that many steps before); a per-cell
+byte of flags (SOLID, BODIES, TRIANGLES) says where there is anything to test, and the
+cloth's cells are flagged and unflagged in O(overlaps) (:func:`register_cloth`). On
+large grids the cell state does not fit in the caches and a crossing would wait for
+memory: the kernel evaluates w_i a few particles ahead and prefetches the cells their
+paths will mark (``prefetch``; no effect on the numbers).
 """
 
 from __future__ import annotations
