@@ -46,7 +46,8 @@ Choices the paper leaves open (written down here):
   found through per-cell flags; cloth triangles registered in O(overlaps)) and the field
   update (u is refreshed in the cells whose marks change and in those whose marks lapse
   ``memory`` later); nothing per step is O(cells). On grids of ``PREFETCH_CELLS`` cells
-  and more the tracing prefetches the cell state a few particles ahead. Measured
+  and more, with fewer particles than half the cells, the tracing prefetches the cell
+  state a few particles ahead. Measured
   figures: ``experiments/README.md`` (``scaling_particles``, ``bench_particles.py``).
 - *Domain faces.* Particles leave through every face and die (the field outside the grid
   is not kept); boundary kinds (slip, periodic, ...) do not steer them.
@@ -92,7 +93,9 @@ from windbench.wind.tracing import (
 
 CONTACT_OFFSET = 1e-6  # particles rest this many cell widths outside a surface they hit
 SORT_EVERY = 8  # steps between reorderings of the particles by cell (memory locality)
-PREFETCH_CELLS = 1 << 16  # grids this large (cell state > 2 MB) prefetch ahead of tracing
+# Grids this large (cell state > 2 MB) prefetch the cells ahead of tracing while particles
+# are sparse (fewer than one per two cells); denser particles find their cells in cache.
+PREFETCH_CELLS = 1 << 16
 
 
 def _check(params) -> None:
@@ -142,7 +145,7 @@ class ParticleWind(WindField):
         self._max_age = float(params.max_age)
         self._max_hits = int(params.max_hits)
         self._mark_mode = MARK_MODES[params.deflected_cells]
-        self._prefetch = grid.n_cells >= PREFETCH_CELLS
+        self._big_grid = grid.n_cells >= PREFETCH_CELLS
         self._seed = int(params.seed)
         # state
         n_sources = len(scene.sources)
@@ -276,7 +279,7 @@ class ParticleWind(WindField):
             CONTACT_OFFSET * self._h,
             self._max_hits,
             self._mark_mode,
-            self._prefetch,
+            self._big_grid and 2 * n_traced < self.grid.n_cells,  # prefetch when sparse
             self._pos,
             self._src,
             self._age,
