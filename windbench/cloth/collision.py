@@ -4,7 +4,9 @@ The paper's cloth system detects cloth/body contacts with k-DOP hierarchies [MKE
 the bodies are few analytic shapes, so each cloth vertex asks the signed distance to their
 union (:func:`windbench.geometry.bodies.union_distance_point`, reused, not rewritten) and a
 vertex closer than the collision margin is moved out along the body's outward normal
-(position-based contact, Mueller et al. 2007). Coulomb friction limits the tangential
+(position-based contact, Mueller et al. 2007); a vertex outside every body's bounding box grown
+by the margin is skipped (:func:`near_a_body`, the same result for a fraction of the cost).
+Coulomb friction limits the tangential
 displacement of a contact in the same substep: it is cancelled if shorter than
 ``mu x penetration depth`` (static), else shortened by that amount (kinetic).
 
@@ -17,7 +19,33 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from windbench.geometry.bodies import union_distance_point
+from windbench.geometry.bodies import Body, union_distance_point
+
+
+def body_boxes(bodies: tuple[Body, ...], margin: float) -> np.ndarray:
+    """(m, 6) bounding boxes (lower, upper) of the bodies grown by ``margin`` (planes: all space).
+
+    The broad phase of :func:`near_a_body`: a point outside body b's grown box lies farther
+    than ``margin`` from b, so b cannot touch it.
+    """
+    boxes = np.empty((len(bodies), 6))
+    for b, body in enumerate(bodies):
+        lo, hi = body.bounds()
+        boxes[b, :3], boxes[b, 3:] = lo - margin, hi + margin
+    return boxes
+
+
+@njit(cache=True, inline="always")
+def near_a_body(boxes, px, py, pz):
+    """Whether p lies in any grown bounding box (:func:`body_boxes`); else no contact."""
+    for b in range(boxes.shape[0]):
+        if (
+            boxes[b, 0] <= px <= boxes[b, 3]
+            and boxes[b, 1] <= py <= boxes[b, 4]
+            and boxes[b, 2] <= pz <= boxes[b, 5]
+        ):
+            return True
+    return False
 
 
 @njit(cache=True, inline="always")

@@ -58,7 +58,7 @@ def dihedral_angles(positions: np.ndarray, hinges: np.ndarray) -> np.ndarray:
     """Signed dihedral angle of each hinge, the same convention as the solver's kernel.
 
     With edge e = x1 - x0, normals nA = (x2 - x0) x e... written out as in
-    :func:`windbench.cloth.solver.hinge_angle_gradient`: theta = atan2((nA x nB) . e^, nA . nB).
+    :func:`windbench.cloth.solver.hinge_gradient`: theta = atan2((nA x nB) . e^, nA . nB).
     """
     x0, x1, x2, x3 = (positions[hinges[:, k]] for k in range(4))
     e = x1 - x0
