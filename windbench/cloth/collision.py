@@ -80,20 +80,23 @@ def project_vertex(kinds, params, margin, friction, x_prev, p, normal):
 
 
 @njit(cache=True)
-def penetration_depths(kinds, params, positions, out):
-    """out[i] = max(0, -sdf(x_i)): how deep vertex i lies inside the union of the bodies."""
+def deepest_penetration(kinds, params, boxes, positions):
+    """max_i max(0, -sdf(x_i)): how deep the deepest vertex lies inside the union of the bodies.
+
+    Only vertices inside a body's bounding box (``boxes``, :func:`body_boxes`) can be inside it.
+    """
+    normal = np.empty(3)
+    deepest = 0.0
     for i in range(positions.shape[0]):
-        normal = np.empty(3)
-        d = union_distance_point(
-            kinds, params, positions[i, 0], positions[i, 1], positions[i, 2], normal
-        )
-        out[i] = max(0.0, -d)
+        px, py, pz = positions[i, 0], positions[i, 1], positions[i, 2]
+        if near_a_body(boxes, px, py, pz):
+            deepest = max(deepest, -union_distance_point(kinds, params, px, py, pz, normal))
+    return deepest
 
 
-def max_penetration(kinds: np.ndarray, params: np.ndarray, positions: np.ndarray) -> float:
+def max_penetration(kinds, params, boxes, positions) -> float:
     """Largest depth (m) of any vertex inside any body; 0 with no bodies or no vertices."""
     if kinds.shape[0] == 0 or positions.shape[0] == 0:
         return 0.0
-    out = np.empty(positions.shape[0])
-    penetration_depths(kinds, params, np.ascontiguousarray(positions, dtype=np.float64), out)
-    return float(out.max())
+    x = np.ascontiguousarray(positions, dtype=np.float64)
+    return float(deepest_penetration(kinds, params, boxes, x))

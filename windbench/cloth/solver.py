@@ -401,6 +401,17 @@ def xpbd_frame(
     return work, energy, finite
 
 
+@njit(cache=True)
+def max_edge_stretch(x, edges, rest):
+    """max_e |x_i - x_j| / L_e - 1 over the edges (i, j) of ``edges`` (as many as ``rest``)."""
+    top = -np.inf
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+        top = max(top, math.sqrt(dx * dx + dy * dy + dz * dz) / rest[e] - 1.0)
+    return top
+
+
 def _param(params, key, default=None):
     if params is None:
         return default
@@ -601,18 +612,19 @@ class XPBDCloth:
 
     def max_stretch(self, positions) -> float:
         """Largest relative elongation of a stretch (warp/weft) edge, |x_i - x_j| / L - 1."""
-        e = self.topology.edges[self.stretch_edges]
-        if e.size == 0:
+        edges, rest = self._edge_arrays[0][: self.n_stretch], self._edge_arrays[1]
+        if edges.shape[0] == 0:
             return 0.0
-        length = np.linalg.norm(positions[e[:, 0]] - positions[e[:, 1]], axis=1)
-        return float(np.max(length / self.topology.edge_length[self.stretch_edges] - 1.0))
+        return float(max_edge_stretch(np.ascontiguousarray(positions, np.float64), edges, rest))
 
     def stats(self, state: ClothState) -> dict[str, float]:
         """Figures recorded per step: kinetic energy (J), deepest body penetration (m),
         largest stretch of a warp/weft edge (relative)."""
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
-            "max_penetration": max_penetration(self.body_kinds, self.body_params, state.positions),
+            "max_penetration": max_penetration(
+                self.body_kinds, self.body_params, self.body_boxes, state.positions
+            ),
             "max_stretch": self.max_stretch(state.positions),
         }
 
