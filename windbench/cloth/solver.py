@@ -74,7 +74,7 @@ from numba import njit
 
 from windbench.cloth.collision import body_boxes, max_penetration, near_a_body, project_vertex
 from windbench.cloth.model import ClothModel, ClothState
-from windbench.cloth.topology import build_topology, tethers
+from windbench.cloth.topology import build_topology, colour_order, tethers
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import body_table
 
@@ -516,7 +516,7 @@ class XPBDCloth:
         # (stretch edges first: the further edge passes cover them alone)
         self.edge_order = np.lexsort((path[topo.edges].min(axis=1), topo.edge_shear))
         self.n_stretch = int(np.count_nonzero(~topo.edge_shear))
-        self.hinge_order = np.argsort(path[topo.hinges].min(axis=1), kind="stable")
+        self.hinge_order = colour_order(topo.hinges, path[topo.hinges].min(axis=1))
         eo, ho = self.edge_order, self.hinge_order
         self._edge_arrays = tuple(
             np.ascontiguousarray(a[eo])
