@@ -520,11 +520,11 @@ class XPBDCloth:
         near = path[topo.edges].min(axis=1)
         step = topo.edge_length.min() if topo.edges.size else 1.0
         band = np.where(np.isfinite(near), np.round(near / step), -1).astype(np.int64)
-        self.edge_order = colour_order(
+        self.edge_order, _ = colour_order(
             topo.edges, near, topo.edge_shear * (band.max(initial=0) + 2) + band
         )
         self.n_stretch = int(np.count_nonzero(~topo.edge_shear))
-        self.hinge_order = colour_order(topo.hinges, path[topo.hinges].min(axis=1))
+        self.hinge_order, _ = colour_order(topo.hinges, path[topo.hinges].min(axis=1))
         eo, ho = self.edge_order, self.hinge_order
         self._edge_arrays = tuple(
             np.ascontiguousarray(a[eo])

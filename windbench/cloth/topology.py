@@ -155,7 +155,7 @@ def tethers(
 
 def colour_order(
     constraints: np.ndarray, priority: np.ndarray, group: np.ndarray | None = None
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """Order of the constraints (rows of vertex ids) grouped by a greedy colouring.
 
     Constraints are taken by ``group``, then increasing ``priority``; each gets the smallest
@@ -164,6 +164,7 @@ def colour_order(
     Consecutive constraints of one colour touch disjoint vertices, so a Gauss-Seidel sweep
     in this order does the same as any order of the colour, while the processor overlaps
     neighbours instead of waiting for each result (measured: sweeps 10-30% faster).
+    Returns (order, colour of each constraint in that order).
     """
     group = np.zeros(constraints.shape[0], np.int64) if group is None else group
     by_priority = np.lexsort((priority, group))
@@ -186,4 +187,5 @@ def colour_order(
         for i in rows[k]:
             used[i] |= 1 << c
             touched.append(i)
-    return by_priority[np.lexsort((colour[by_priority], group[by_priority]))]
+    order = by_priority[np.lexsort((colour[by_priority], group[by_priority]))]
+    return order, colour[order]
