@@ -4,11 +4,11 @@ The paper's cloth system detects cloth/body contacts with k-DOP hierarchies [MKE
 the bodies are few analytic shapes, so each cloth vertex asks the signed distance to their
 union (:func:`windbench.geometry.bodies.union_distance_point`, reused, not rewritten) and a
 vertex closer than the collision margin is moved out along the body's outward normal
-(position-based contact, Mueller et al. 2007); a vertex outside every body's bounding box grown
-by the margin is skipped (:func:`near_a_body`, the same result for a fraction of the cost).
-Coulomb friction limits the tangential
-displacement of a contact in the same substep: it is cancelled if shorter than
-``mu x penetration depth`` (static), else shortened by that amount (kinetic).
+(position-based contact, Mueller et al. 2007). A vertex outside every body's bounding box
+grown by the margin is skipped (:func:`near_a_body`): it lies farther than the margin from
+all bodies, so the result is the same, for a fraction of the cost. Coulomb friction limits
+the tangential displacement of a contact in the same substep: it is cancelled if shorter
+than ``mu x penetration depth`` (static), else shortened by that amount (kinetic).
 
 Bodies are rigid and do not move (the paper's walls and character, §4.1.2), so a vertex
 pushed out of a body never gains energy from it beyond the small correction of the depth.

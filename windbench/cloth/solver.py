@@ -17,7 +17,7 @@ mass-spring with CG, projective dynamics with a prefactored matrix, XPBD) we use
   its prefactored matrix, CG a constraint filter);
 - the kernels are plain loops over edges and hinges (numba, no sparse algebra, one
   compiled signature); their cost is linear in the mesh size and recorded by
-  ``experiments/bench_cloth.py``;
+  ``experiments/bench_cloth.py`` (see *Cost* below);
 - small substeps make the time integration converge: with zero stiffness work the
   free fall of a cloth is the exact symplectic-Euler parabola, which tends to
   ``1/2 g t^2`` as the substep shrinks (tested).
@@ -56,6 +56,21 @@ over the substeps of one frame: the wind is sampled once per frame. This explici
 is stable while ``dt rho_air C_D |v_rel| / (mass per area) < 2``: 0.94 for the default flag
 fabric (0.15 kg/m^2) in 6 m/s wind at dt = 1/60 s; much lighter cloth or stronger wind
 needs a shorter ``sim.dt``.
+
+Cost. A frame is one call of :func:`xpbd_frame` (all substeps, contacts, damping, the work
+and energy of the divergence check), serial (the meshes are small and the machine's cores
+shared), with no allocation per frame: the substep constants alpha~ = alpha / h^2 are
+computed once per ``dt`` and the work space is kept by the solver. Measured on the 40 x 25
+flag (8 substeps, 4 edge passes), the hinge pass is about half the frame (one fast atan2 per
+hinge), the edge passes a third. Three orderings, fixed with the model, cut it without
+changing what is computed: contacts are tested only for vertices inside a body's bounding
+box grown by the margin (:func:`~windbench.cloth.collision.near_a_body`: the same contacts,
+bit for bit; the pole's cylinder cost a quarter of the frame before); hinges go by a greedy
+colouring, and edges by colour within each band of equal distance from the pins
+(:func:`~windbench.cloth.topology.colour_order`): consecutive constraints then share no
+vertex and the processor overlaps them instead of waiting for each result, while the
+sweep still runs outwards from the pins band by band (the stretch of hanging and flying
+cloth stays within a few per cent of the pin-ordered sweep, measured).
 
 Divergence. The kinetic energy can never exceed the work done on the cloth by gravity and
 the external forces (the constraints store or dissipate energy, the bodies do not move). A
