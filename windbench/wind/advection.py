@@ -17,7 +17,6 @@ keeps it stable); second order in space and time where the field is smooth.
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit, prange
 
 

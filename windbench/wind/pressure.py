@@ -114,12 +114,12 @@ def _row_is_interior(x, i, j):
 
 
 @njit(cache=True, inline="always")
-def _uniform_sum(x, coef, i, j, k):
-    """sum_f w_f x_nb where every face of the cell is open (w_f = the level's coefficient)."""
+def _uniform_sum(x, c0, c1, c2, i, j, k):
+    """sum_f w_f x_nb where every face of the cell is open (w_f = the level's c_axis)."""
     return (
-        coef[0] * (x[i - 1, j, k] + x[i + 1, j, k])
-        + coef[1] * (x[i, j - 1, k] + x[i, j + 1, k])
-        + coef[2] * (x[i, j, k - 1] + x[i, j, k + 1])
+        c0 * (x[i - 1, j, k] + x[i + 1, j, k])
+        + c1 * (x[i, j - 1, k] + x[i, j + 1, k])
+        + c2 * (x[i, j, k - 1] + x[i, j, k + 1])
     )
 
 
@@ -132,6 +132,8 @@ def _residual_cell(x, b, wx, wy, wz, periodic, i, j, k, out):
 @njit(cache=True)
 def _residual_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, out):
     """out[i] = (b - A x)[i]: one plane of the residual."""
+    c0, c1, c2 = coef[0], coef[1], coef[2]
+    d_uniform = 2.0 * (c0 + c1 + c2)
     ny, nz = x.shape[1], x.shape[2]
     for j in range(ny):
         if not _row_is_interior(x, i, j) or nz < 3:
@@ -140,9 +142,10 @@ def _residual_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, out):
             continue
         _residual_cell(x, b, wx, wy, wz, periodic, i, j, 0, out)
         if uniform[i, j]:
-            d = 2.0 * (coef[0] + coef[1] + coef[2])
             for k in range(1, nz - 1):  # contiguous, no weight reads: vectorised
-                out[i, j, k] = b[i, j, k] - (d * x[i, j, k] - _uniform_sum(x, coef, i, j, k))
+                out[i, j, k] = b[i, j, k] - (
+                    d_uniform * x[i, j, k] - _uniform_sum(x, c0, c1, c2, i, j, k)
+                )
         else:
             for k in range(1, nz - 1):
                 s, d = _interior_sum(x, wx, wy, wz, i, j, k)
@@ -167,6 +170,8 @@ def _operator_cell(x, wx, wy, wz, periodic, i, j, k, out):
 def apply_operator(x, wx, wy, wz, periodic, uniform, coef, out):
     """out = A x = sum_f c w_f (x_c - x_nb)."""
     nx, ny, nz = x.shape
+    c0, c1, c2 = coef[0], coef[1], coef[2]
+    d_uniform = 2.0 * (c0 + c1 + c2)
     for i in prange(nx):
         for j in range(ny):
             if not _row_is_interior(x, i, j) or nz < 3:
@@ -175,9 +180,8 @@ def apply_operator(x, wx, wy, wz, periodic, uniform, coef, out):
                 continue
             _operator_cell(x, wx, wy, wz, periodic, i, j, 0, out)
             if uniform[i, j]:
-                d = 2.0 * (coef[0] + coef[1] + coef[2])
                 for k in range(1, nz - 1):
-                    out[i, j, k] = d * x[i, j, k] - _uniform_sum(x, coef, i, j, k)
+                    out[i, j, k] = d_uniform * x[i, j, k] - _uniform_sum(x, c0, c1, c2, i, j, k)
             else:
                 for k in range(1, nz - 1):
                     s, d = _interior_sum(x, wx, wy, wz, i, j, k)
@@ -195,6 +199,8 @@ def _gs_cell(x, b, wx, wy, wz, periodic, i, j, k):
 @njit(cache=True)
 def _gs_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, colour):
     nz = x.shape[2]
+    c0, c1, c2 = coef[0], coef[1], coef[2]
+    inv_d = 0.5 / (c0 + c1 + c2)
     for j in range(x.shape[1]):
         first = (i + j + colour) % 2  # the first k of this colour in row (i, j)
         if not _row_is_interior(x, i, j) or nz < 3:
@@ -204,9 +210,8 @@ def _gs_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, colour):
         if first == 0:
             _gs_cell(x, b, wx, wy, wz, periodic, i, j, 0)
         if uniform[i, j]:  # every face open: the constant stencil, no weight reads
-            inv_d = 0.5 / (coef[0] + coef[1] + coef[2])
             for k in range(2 - first, nz - 1, 2):
-                x[i, j, k] = (b[i, j, k] + _uniform_sum(x, coef, i, j, k)) * inv_d
+                x[i, j, k] = (b[i, j, k] + _uniform_sum(x, c0, c1, c2, i, j, k)) * inv_d
         else:  # off every face: no bounds or periodic checks
             for k in range(2 - first, nz - 1, 2):
                 s, d = _interior_sum(x, wx, wy, wz, i, j, k)
