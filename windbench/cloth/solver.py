@@ -177,7 +177,7 @@ def project_hinge(p, inv_mass, i0, i1, i2, i3, rest, alpha):
     scalars: g2 = -|e| nA/|nA|^2, g3 = -|e| nB/|nB|^2, g0 = -(1-a2) g2 - (1-a3) g3,
     g1 = -a2 g2 - a3 g3 (a = projection of the opposite vertex on the edge);
     dlambda = -C / (sum w |g|^2 + alpha~)  (lambda starts at 0: one pass per substep).
-    Four divisions and one square root per hinge (the reciprocals are shared).
+    Five divisions (one in the atan2) and one square root per hinge.
     """
     w0, w1, w2, w3 = inv_mass[i0], inv_mass[i1], inv_mass[i2], inv_mass[i3]
     if w0 + w1 + w2 + w3 == 0.0:
