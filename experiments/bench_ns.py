@@ -1,5 +1,6 @@
-"""Benchmark of the navier_stokes backend on scene=fence: seconds per step (advect, diffuse,
-project), pressure iterations and memory per cell, for 16^3 .. 128^3 (cells along x).
+"""Benchmark of the navier_stokes backend on scene=fence in the cubic domain of
+``experiment=scaling``: seconds per step (advect, diffuse, project), pressure iterations
+and memory per cell, for 16^3 .. 128^3 cells.
 
     PYTHONPATH=. python experiments/bench_ns.py [--resolutions 16 32 64 128] [--steps 10]
 
@@ -53,8 +54,8 @@ def array_bytes(obj) -> int:
 def bench(resolution: int, steps: int, advection: str) -> dict:
     cfg = compose_config(
         [
+            "experiment=scaling",  # scene=fence in a cube: resolution r gives r^3 cells
             "wind=navier_stokes",
-            "scene=fence",
             f"grid.resolution={resolution}",
             f"wind.advection={advection}",
         ]

@@ -48,23 +48,24 @@ class AeroParams:
 
 
 @njit(cache=True, inline="always")
-def triangle_force(x0, x1, x2, v_rel, c_d, c_l, rho, out):
-    """out = F_D + F_L on one triangle with corners x0..x2 and relative velocity v_rel."""
-    out[0] = 0.0
-    out[1] = 0.0
-    out[2] = 0.0
-    e1 = x1 - x0
-    e2 = x2 - x0
-    nx = e1[1] * e2[2] - e1[2] * e2[1]
-    ny = e1[2] * e2[0] - e1[0] * e2[2]
-    nz = e1[0] * e2[1] - e1[1] * e2[0]
+def triangle_force(positions, a, b, c, vx, vy, vz, c_d, c_l, rho):
+    """F_D + F_L on triangle (a, b, c) of ``positions`` with relative velocity (vx, vy, vz)."""
+    e1x = positions[b, 0] - positions[a, 0]
+    e1y = positions[b, 1] - positions[a, 1]
+    e1z = positions[b, 2] - positions[a, 2]
+    e2x = positions[c, 0] - positions[a, 0]
+    e2y = positions[c, 1] - positions[a, 1]
+    e2z = positions[c, 2] - positions[a, 2]
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
     twice_area = np.sqrt(nx * nx + ny * ny + nz * nz)
-    speed2 = v_rel[0] * v_rel[0] + v_rel[1] * v_rel[1] + v_rel[2] * v_rel[2]
+    speed2 = vx * vx + vy * vy + vz * vz
     if twice_area == 0.0 or speed2 == 0.0:
-        return
+        return 0.0, 0.0, 0.0
     area = 0.5 * twice_area
     speed = np.sqrt(speed2)
-    vx, vy, vz = v_rel[0] / speed, v_rel[1] / speed, v_rel[2] / speed
+    vx, vy, vz = vx / speed, vy / speed, vz / speed
     nx, ny, nz = nx / twice_area, ny / twice_area, nz / twice_area
     ndotv = nx * vx + ny * vy + nz * vz
     if ndotv < 0.0:  # eq. (3.1): flip the normal towards v_rel
@@ -72,58 +73,56 @@ def triangle_force(x0, x1, x2, v_rel, c_d, c_l, rho, out):
     q = 0.5 * rho * speed2 * area * ndotv  # dynamic pressure x area x cos(theta)
     # u^ = (n~ x v^) x v^ = (n~ . v^) v^ - n~   (length cos(alpha), see module docstring)
     ux, uy, uz = ndotv * vx - nx, ndotv * vy - ny, ndotv * vz - nz
-    out[0] = -c_d * q * vx + c_l * q * ux
-    out[1] = -c_d * q * vy + c_l * q * uy
-    out[2] = -c_d * q * vz + c_l * q * uz
+    return -c_d * q * vx + c_l * q * ux, -c_d * q * vy + c_l * q * uy, -c_d * q * vz + c_l * q * uz
+
+
+@njit(cache=True, inline="always")
+def _mean_relative(velocities, wind, a, b, c, k):
+    """Component k of v_object - u averaged over the corners a, b, c."""
+    vk = velocities[a, k] + velocities[b, k] + velocities[c, k]
+    return (vk - wind[a, k] - wind[b, k] - wind[c, k]) / 3.0
 
 
 @njit(cache=True)
-def triangle_forces(positions, velocities, wind, triangles, c_d, c_l, rho, out):
-    """out[t] = aerodynamic force on triangle t; wind and velocities given per vertex.
+def triangle_forces(positions, velocities, wind, triangles, c_d, c_l, rho, tri_out, vertex_out):
+    """tri_out[t] = aerodynamic force on triangle t; vertex_out = its share at the corners.
 
-    The triangle's velocity and wind are the means over its three vertices (the paper
-    records the wind at the vertices, §4.1.2).
+    Wind and velocities are given per vertex; the triangle's velocity and wind are the means
+    over its three vertices (the paper records the wind at the vertices, §4.1.2). Each
+    triangle's force is shared equally by its corners: vertex_out[i] = sum_t F_t / 3.
     """
+    vertex_out[:] = 0.0
     for t in range(triangles.shape[0]):
         a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
-        v_rel = np.empty(3)
+        # v_rel = v_object - u, averaged over the three corners
+        vx = _mean_relative(velocities, wind, a, b, c, 0)
+        vy = _mean_relative(velocities, wind, a, b, c, 1)
+        vz = _mean_relative(velocities, wind, a, b, c, 2)
+        f = triangle_force(positions, a, b, c, vx, vy, vz, c_d, c_l, rho)
         for k in range(3):
-            v_rel[k] = (
-                velocities[a, k]
-                + velocities[b, k]
-                + velocities[c, k]
-                - wind[a, k]
-                - wind[b, k]
-                - wind[c, k]
-            ) / 3.0
-        triangle_force(positions[a], positions[b], positions[c], v_rel, c_d, c_l, rho, out[t])
-
-
-@njit(cache=True)
-def scatter_to_vertices(triangles, tri_forces, n_vertices):
-    """Vertex forces: each triangle's force shared equally by its three corners."""
-    out = np.zeros((n_vertices, 3))
-    for t in range(triangles.shape[0]):
-        for j in range(3):
-            for k in range(3):
-                out[triangles[t, j], k] += tri_forces[t, k] / 3.0
-    return out
+            tri_out[t, k] = f[k]
+            share = f[k] / 3.0
+            vertex_out[a, k] += share
+            vertex_out[b, k] += share
+            vertex_out[c, k] += share
 
 
 def aerodynamic_forces(positions, velocities, wind, triangles, params: AeroParams):
     """(per-triangle forces ``(m, 3)``, per-vertex forces ``(n, 3)``) in newtons."""
     tri = np.empty((triangles.shape[0], 3))
+    vert = np.empty((positions.shape[0], 3))
     triangle_forces(
         np.ascontiguousarray(positions, dtype=np.float64),
         np.ascontiguousarray(velocities, dtype=np.float64),
         np.ascontiguousarray(wind, dtype=np.float64),
         np.ascontiguousarray(triangles, dtype=np.int64),
-        params.drag_coefficient,
-        params.lift_coefficient,
-        params.air_density,
+        float(params.drag_coefficient),
+        float(params.lift_coefficient),
+        float(params.air_density),
         tri,
+        vert,
     )
-    return tri, scatter_to_vertices(triangles.astype(np.int64), tri, positions.shape[0])
+    return tri, vert
 
 
 def plate_coefficients(alpha, params: AeroParams):

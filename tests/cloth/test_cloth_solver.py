@@ -10,13 +10,14 @@ import pytest
 
 from windbench.aero import AeroParams, aerodynamic_forces
 from windbench.cloth import make_cloth_solver
+from windbench.cloth.collision import max_penetration
 from windbench.cloth.mesh import flag_mesh
 from windbench.cloth.model import ClothModel
 from windbench.cloth.solver import XPBDCloth, fast_atan2, project_hinge
 from windbench.cloth.topology import dihedral_angles
 from windbench.config import ClothConfig
 from windbench.errors import ConfigError, SimulationDiverged
-from windbench.geometry.bodies import body_from_config
+from windbench.geometry.bodies import body_from_config, distances
 
 DT = 1.0 / 60.0
 
@@ -170,6 +171,31 @@ def test_cloth_falls_onto_a_body_and_rests_on_it(body, top):
     if body["type"] != "capsule":  # on a flat top, all of the cloth lies flat
         inner = np.linalg.norm(model.rest_positions[:, :2], axis=1) < 0.25
         np.testing.assert_allclose(state.positions[inner, 2], top + cfg.collision_margin, atol=2e-3)
+
+
+def test_bounding_box_broad_phase_changes_no_bit():
+    """Skipping vertices outside the bodies' grown boxes gives the same contacts exactly."""
+    bodies = (
+        body_from_config({"type": "capsule", "a": [-1, 0, 0], "b": [1, 0, 0], "radius": 0.2}, "b"),
+        body_from_config({"type": "box", "min": [0.2, -1, -1], "max": [0.3, 1, 0.25]}, "w"),
+    )
+    model = _cloth(n=14, size=0.6, origin=(-0.3, -0.3, 0.3))
+    culled = XPBDCloth(model, bodies, ClothConfig())
+    every = XPBDCloth(model, bodies, ClothConfig())
+    every.body_boxes = np.tile([-np.inf, -np.inf, -np.inf, np.inf, np.inf, np.inf], (2, 1))
+    a, _ = _run(culled, model, 40, air=True)
+    b, _ = _run(every, model, 40, air=True)
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.velocities, b.velocities)
+    # and the recorded figures are the brute-force ones
+    rng = np.random.default_rng(1)
+    pts = np.concatenate([a.positions, rng.uniform(-0.4, 0.4, (200, 3))])
+    depth = np.maximum(0.0, -distances(bodies, pts)[0]).max()
+    kinds, params, boxes = culled.body_kinds, culled.body_params, culled.body_boxes
+    assert depth > 0.01 and max_penetration(kinds, params, boxes, pts) == depth
+    e = culled.topology.edges[culled.stretch_edges]
+    stretch = np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1)
+    stretch = stretch / culled.topology.edge_length[culled.stretch_edges] - 1.0
+    assert culled.max_stretch(pts) == pytest.approx(stretch.max(), rel=1e-14)
 
 
 def test_divergence_is_reported_with_the_step():

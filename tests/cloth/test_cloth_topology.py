@@ -11,7 +11,13 @@ import pytest
 from windbench.cloth.mesh import flag_mesh, shirt_mesh
 from windbench.cloth.model import ClothModel
 from windbench.cloth.solver import XPBDCloth
-from windbench.cloth.topology import build_topology, dihedral_angles, tethers, triangle_areas
+from windbench.cloth.topology import (
+    build_topology,
+    colour_order,
+    dihedral_angles,
+    tethers,
+    triangle_areas,
+)
 from windbench.config import ClothConfig
 
 W, H, NU, NV = 1.2, 0.8, 7, 5
@@ -127,3 +133,29 @@ def test_shirt_tubes_are_closed_and_hang_from_their_top_rings():
     centre = np.where(sleeve_pins[:, 1:2] > 0, [0, 0.3, 1.5], [0, -0.3, 1.5])
     np.testing.assert_allclose(np.linalg.norm(sleeve_pins - centre, axis=1), 0.08)
     assert len(sleeve_pins) == 2 * 10  # 2 round(pi r_s / (2 pi r / 24)) = 10 around each
+
+
+def test_colour_order_of_a_chain_alternates():
+    chain = np.array([[0, 1], [1, 2], [2, 3], [3, 4]])
+    order, colour = colour_order(chain, np.arange(4.0))
+    assert order.tolist() == [0, 2, 1, 3] and colour.tolist() == [0, 0, 1, 1]
+    order, colour = colour_order(chain, np.arange(4.0), group=np.array([0, 0, 1, 1]))
+    assert order.tolist() == [0, 1, 2, 3] and colour.tolist() == [0, 1, 0, 1]
+
+
+def test_colour_order_is_a_greedy_colouring_of_the_hinges():
+    mesh = _flag(pin="pole")
+    t = build_topology(mesh.vertices, mesh.triangles)
+    priority = np.random.default_rng(0).permutation(len(t.hinges)).astype(float)
+    order, colour = colour_order(t.hinges, priority)
+    assert sorted(order.tolist()) == list(range(len(t.hinges)))
+    assert np.all(np.diff(colour) >= 0)
+    for c in np.unique(colour):
+        rows = order[colour == c]
+        assert np.all(np.diff(priority[rows]) > 0)  # by priority within a colour
+        assert len(np.unique(t.hinges[rows])) == 4 * len(rows)  # no shared vertex
+        # greedy: every hinge of colour c > 0 meets an earlier hinge of each smaller colour
+        for k in rows if c > 0 else []:
+            for lower in range(c):
+                earlier = order[(colour == lower) & (priority[order] < priority[k])]
+                assert np.isin(t.hinges[earlier], t.hinges[k]).any()

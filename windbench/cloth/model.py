@@ -62,9 +62,14 @@ class ClothModel:
 
     def per_cloth_sum(self, triangle_values: np.ndarray) -> np.ndarray:
         """Sum a per-triangle ``(m, 3)`` quantity over each cloth -> ``(n_cloths, 3)``."""
-        out = np.zeros((self.n_cloths, triangle_values.shape[1]))
-        np.add.at(out, self.triangle_cloth, triangle_values)
-        return out
+        values = np.asarray(triangle_values, dtype=np.float64)
+        return np.stack(
+            [
+                np.bincount(self.triangle_cloth, weights=values[:, k], minlength=self.n_cloths)
+                for k in range(values.shape[1])
+            ],
+            axis=1,
+        ).reshape(self.n_cloths, values.shape[1])
 
     def initial_state(self) -> ClothState:
         return ClothState(self.rest_positions.copy(), np.zeros_like(self.rest_positions))

@@ -17,7 +17,7 @@ mass-spring with CG, projective dynamics with a prefactored matrix, XPBD) we use
   its prefactored matrix, CG a constraint filter);
 - the kernels are plain loops over edges and hinges (numba, no sparse algebra, one
   compiled signature); their cost is linear in the mesh size and recorded by
-  ``experiments/bench_cloth.py``;
+  ``experiments/bench_cloth.py`` (see *Cost* below);
 - small substeps make the time integration converge: with zero stiffness work the
   free fall of a cloth is the exact symplectic-Euler parabola, which tends to
   ``1/2 g t^2`` as the substep shrinks (tested).
@@ -57,6 +57,21 @@ is stable while ``dt rho_air C_D |v_rel| / (mass per area) < 2``: 0.94 for the d
 fabric (0.15 kg/m^2) in 6 m/s wind at dt = 1/60 s; much lighter cloth or stronger wind
 needs a shorter ``sim.dt``.
 
+Cost. A frame is one call of :func:`xpbd_frame` (all substeps, contacts, damping, the work
+and energy of the divergence check), serial (the meshes are small and the machine's cores
+shared), with no allocation per frame: the substep constants alpha~ = alpha / h^2 are
+computed once per ``dt`` and the work space is kept by the solver. Measured on the 40 x 25
+flag (8 substeps, 4 edge passes), the hinge pass is about half the frame (one fast atan2 per
+hinge), the edge passes a third. Three orderings, fixed with the model, cut it without
+changing what is computed: contacts are tested only for vertices inside a body's bounding
+box grown by the margin (:func:`~windbench.cloth.collision.near_a_body`: the same contacts,
+bit for bit; the pole's cylinder cost a quarter of the frame before); edges and hinges go
+by colour within each band of equal distance from the pins
+(:func:`~windbench.cloth.topology.colour_order`): consecutive constraints then share no
+vertex and the processor overlaps them instead of waiting for each result, while the
+sweep still runs outwards from the pins band by band (the stretch of hanging and flying
+cloth stays within a few per cent of the pin-ordered sweep, measured).
+
 Divergence. The kinetic energy can never exceed the work done on the cloth by gravity and
 the external forces (the constraints store or dissipate energy, the bodies do not move). A
 step raises :class:`~windbench.errors.SimulationDiverged` when positions or velocities are
@@ -72,9 +87,9 @@ from collections.abc import Mapping
 import numpy as np
 from numba import njit
 
-from windbench.cloth.collision import max_penetration, project_vertex
+from windbench.cloth.collision import body_boxes, max_penetration, near_a_body, project_vertex
 from windbench.cloth.model import ClothModel, ClothState
-from windbench.cloth.topology import build_topology, tethers
+from windbench.cloth.topology import build_topology, colour_order, tethers
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import body_table
 
@@ -87,7 +102,9 @@ def fast_atan2(y, x):
     """atan2(y, x) from the polynomial of Abramowitz & Stegun 4.4.49 (|error| <= 2e-8 rad).
 
     atan(a) = a (1 + sum_k c_k a^2k) on [0, 1] with a = min/max of |x|, |y|, then the octant
-    symmetries; about three times cheaper than the libm call in the hinge loop.
+    symmetries; about three times cheaper than the libm call in the hinge loop. The
+    polynomial is evaluated by Estrin's scheme (powers s^2, s^4 computed beside the pairs)
+    rather than Horner's: the same terms in a third of the dependent multiply-adds.
     """
     ax, ay = abs(x), abs(y)
     mx = max(ax, ay)
@@ -95,30 +112,11 @@ def fast_atan2(y, x):
         return 0.0
     a = min(ax, ay) / mx
     s = a * a
-    r = a * (
-        1.0
-        + s
-        * (
-            -0.3333314528
-            + s
-            * (
-                0.1999355085
-                + s
-                * (
-                    -0.1420889944
-                    + s
-                    * (
-                        0.1065626393
-                        + s
-                        * (
-                            -0.0752896400
-                            + s * (0.0429096138 + s * (-0.0161657367 + s * 0.0028662257))
-                        )
-                    )
-                )
-            )
-        )
-    )
+    s2 = s * s
+    s4 = s2 * s2
+    q0 = (1.0 - 0.3333314528 * s) + s2 * (0.1999355085 - 0.1420889944 * s)
+    q1 = (0.1065626393 - 0.0752896400 * s) + s2 * (0.0429096138 - 0.0161657367 * s)
+    r = a * (q0 + s4 * (q1 + s4 * 0.0028662257))
     if ay > ax:
         r = 0.5 * math.pi - r
     if x < 0.0:
@@ -139,13 +137,14 @@ def _wrap_angle(a):
 
 
 @njit(cache=True, inline="always")
-def hinge_angle_gradient(p, i0, i1, i2, i3, grad):
-    """Dihedral angle of hinge (x0, x1 | x2, x3) = p[i0..i3] and its gradient ``grad`` (4, 3).
+def hinge_gradient(p, i0, i1, i2, i3, grad):
+    """Gradient ``grad`` (4, 3) of the dihedral angle of hinge (x0, x1 | x2, x3) = p[i0..i3].
 
     theta = atan2((nA x nB) . e^, nA . nB), e = x1 - x0, nA = e x (x2 - x0),
     nB = (x0 - x1) x (x3 - x1); d theta/d x2 = -|e| nA/|nA|^2, d theta/d x3 = -|e| nB/|nB|^2,
     the edge vertices share them by the projections of x2, x3 on the edge (Bridson et al.
-    2003), so the gradient sums to zero. Returns nan for a degenerate hinge.
+    2003), so the gradient sums to zero. Returns False (grad untouched) for a degenerate
+    hinge.
     """
     ex, ey, ez = p[i1, 0] - p[i0, 0], p[i1, 1] - p[i0, 1], p[i1, 2] - p[i0, 2]
     el2 = ex * ex + ey * ey + ez * ez
@@ -156,13 +155,9 @@ def hinge_angle_gradient(p, i0, i1, i2, i3, grad):
     nbx, nby, nbz = -(ey * bz - ez * by), -(ez * bx - ex * bz), -(ex * by - ey * bx)
     na2 = nax * nax + nay * nay + naz * naz
     nb2 = nbx * nbx + nby * nby + nbz * nbz
-    if el2 == 0.0 or na2 <= 1e-30 * el2 * el2 or nb2 <= 1e-30 * el2 * el2:
-        return np.nan
+    if not (el2 > 0.0 and na2 > 1e-30 * el2 * el2 and nb2 > 1e-30 * el2 * el2):
+        return False
     el = math.sqrt(el2)
-    cx = nay * nbz - naz * nby
-    cy = naz * nbx - nax * nbz
-    cz = nax * nby - nay * nbx
-    theta = math.atan2((cx * ex + cy * ey + cz * ez) / el, nax * nbx + nay * nby + naz * nbz)
     sa, sb = -el / na2, -el / nb2
     alpha2 = (ax * ex + ay * ey + az * ez) / el2
     alpha3 = ((bx + ex) * ex + (by + ey) * ey + (bz + ez) * ez) / el2
@@ -171,17 +166,18 @@ def hinge_angle_gradient(p, i0, i1, i2, i3, grad):
     for k in range(3):
         grad[0, k] = -(1.0 - alpha2) * grad[2, k] - (1.0 - alpha3) * grad[3, k]
         grad[1, k] = -alpha2 * grad[2, k] - alpha3 * grad[3, k]
-    return theta
+    return True
 
 
 @njit(cache=True, inline="always")
 def project_hinge(p, inv_mass, i0, i1, i2, i3, rest, alpha):
     """One XPBD projection of the bending hinge (i0, i1 | i2, i3) of rest angle ``rest``.
 
-    C = theta - theta_0 with the gradient of :func:`hinge_angle_gradient` written out in
+    C = theta - theta_0 with the gradient of :func:`hinge_gradient` written out in
     scalars: g2 = -|e| nA/|nA|^2, g3 = -|e| nB/|nB|^2, g0 = -(1-a2) g2 - (1-a3) g3,
     g1 = -a2 g2 - a3 g3 (a = projection of the opposite vertex on the edge);
     dlambda = -C / (sum w |g|^2 + alpha~)  (lambda starts at 0: one pass per substep).
+    Five divisions (one in the atan2) and one square root per hinge.
     """
     w0, w1, w2, w3 = inv_mass[i0], inv_mass[i1], inv_mass[i2], inv_mass[i3]
     if w0 + w1 + w2 + w3 == 0.0:
@@ -202,15 +198,14 @@ def project_hinge(p, inv_mass, i0, i1, i2, i3, rest, alpha):
     cy = naz * nbx - nax * nbz
     cz = nax * nby - nay * nbx
     nab = nax * nbx + nay * nby + naz * nbz
-    c = _wrap_angle(fast_atan2((cx * ex + cy * ey + cz * ez) / el, nab) - rest)
-    inv_el2 = 1.0 / el2
+    # theta = atan2((nA x nB) . e / |e|, nA . nB) = atan2((nA x nB) . e, |e| nA . nB)
+    c = _wrap_angle(fast_atan2(cx * ex + cy * ey + cz * ez, el * nab) - rest)
+    inv_el2, inv_na2, inv_nb2 = 1.0 / el2, 1.0 / na2, 1.0 / nb2
     a2 = (ax * ex + ay * ey + az * ez) * inv_el2
     a3 = ((bx + ex) * ex + (by + ey) * ey + (bz + ez) * ez) * inv_el2
-    sa, sb = -el / na2, -el / nb2
-    g2x, g2y, g2z = sa * nax, sa * nay, sa * naz
-    g3x, g3y, g3z = sb * nbx, sb * nby, sb * nbz
+    sa, sb = -el * inv_na2, -el * inv_nb2
     # sum_q w_q |g_q|^2 with |g2|^2 = el2/na2, |g3|^2 = el2/nb2, g2.g3 = sa sb nA.nB
-    q22, q33, q23 = el2 / na2, el2 / nb2, sa * sb * nab
+    q22, q33, q23 = el2 * inv_na2, el2 * inv_nb2, sa * sb * nab
     b0, b1 = 1.0 - a2, 1.0 - a3
     wsum = (
         w0 * (b0 * b0 * q22 + b1 * b1 * q33 + 2.0 * b0 * b1 * q23)
@@ -222,11 +217,22 @@ def project_hinge(p, inv_mass, i0, i1, i2, i3, rest, alpha):
     if denom == 0.0 or denom == np.inf:
         return
     dl = -c / denom
-    for k, g2k, g3k in ((0, g2x, g3x), (1, g2y, g3y), (2, g2z, g3z)):
-        p[i0, k] -= w0 * dl * (b0 * g2k + b1 * g3k)
-        p[i1, k] -= w1 * dl * (a2 * g2k + a3 * g3k)
-        p[i2, k] += w2 * dl * g2k
-        p[i3, k] += w3 * dl * g3k
+    # p_q += w_q dlambda g_q, with g2 = sa nA, g3 = sb nB
+    da, db = dl * sa, dl * sb
+    f0a, f0b, f1a, f1b = w0 * b0 * da, w0 * b1 * db, w1 * a2 * da, w1 * a3 * db
+    f2, f3 = w2 * da, w3 * db
+    p[i0, 0] -= f0a * nax + f0b * nbx
+    p[i0, 1] -= f0a * nay + f0b * nby
+    p[i0, 2] -= f0a * naz + f0b * nbz
+    p[i1, 0] -= f1a * nax + f1b * nbx
+    p[i1, 1] -= f1a * nay + f1b * nby
+    p[i1, 2] -= f1a * naz + f1b * nbz
+    p[i2, 0] += f2 * nax
+    p[i2, 1] += f2 * nay
+    p[i2, 2] += f2 * naz
+    p[i3, 0] += f3 * nbx
+    p[i3, 1] += f3 * nby
+    p[i3, 2] += f3 * nbz
 
 
 @njit(cache=True)
@@ -261,10 +267,7 @@ def damp_velocities(x, v, inv_mass, edges, edge_c, hinges, hinge_c, dt):
     for b in range(hinges.shape[0]):
         if hinge_c[b] == 0.0:
             continue
-        theta = hinge_angle_gradient(
-            x, hinges[b, 0], hinges[b, 1], hinges[b, 2], hinges[b, 3], grad
-        )
-        if theta != theta:
+        if not hinge_gradient(x, hinges[b, 0], hinges[b, 1], hinges[b, 2], hinges[b, 3], grad):
             continue
         rate = 0.0
         s_w = 0.0
@@ -287,61 +290,63 @@ def damp_velocities(x, v, inv_mass, edges, edge_c, hinges, hinge_c, dt):
 def xpbd_frame(
     x,
     v,
+    f_ext,
+    mass,
     inv_mass,
-    accel,
+    gravity,
     edges,
     edge_rest,
-    edge_compliance,
+    edge_alpha,
+    edge_scale,
     edge_damping,
+    n_stretch,
     hinges,
     hinge_rest,
-    hinge_compliance,
+    hinge_alpha,
     hinge_damping,
     tether_anchor,
     tether_length,
     body_kinds,
     body_params,
+    body_boxes,
     margin,
     friction,
     dt,
     substeps,
     edge_iterations,
-    n_stretch,
     x_out,
     v_out,
+    scratch_x,
+    scratch_lambda,
 ):
-    """One frame of ``substeps`` XPBD substeps (module docstring, steps 1-5).
+    """One frame of ``substeps`` XPBD substeps (module docstring, steps 1-5), one call.
 
-    Inputs x, v (n, 3), inv_mass (n,), accel = g + f_ext/m (n, 3); edge_damping and
-    hinge_damping are the damping coefficients c = damping * k; outputs x_out, v_out.
+    Inputs x, v, f_ext (n, 3), mass and inv_mass (n,), gravity (3,); edge_alpha and
+    hinge_alpha the compliances over h^2 (alpha~), edge_scale = 1 / (w_i + w_j + alpha~)
+    (0: skip the edge) (:meth:`XPBDCloth.substep_constants`); edge_damping and
+    hinge_damping the damping coefficients c = damping * k; body_boxes the bodies'
+    bounding boxes grown by the margin (:func:`windbench.cloth.collision.body_boxes`).
+    Outputs x_out, v_out; scratch_x (n, 3) and scratch_lambda (E,) are work space.
+    Returns (W, K, finite): the work ``sum_i (f_i + m_i g) . (x_out_i - x_i)`` (J), the
+    kinetic energy ``1/2 sum m v^2`` (J) of v_out, and whether x_out, v_out are finite.
     """
     n = x.shape[0]
     h = dt / substeps
     inv_h = 1.0 / h
-    xp = x.copy()
+    xp = scratch_x
+    xp[:] = x
     p = x_out
     vv = v_out
     vv[:] = v
     normal = np.empty(3)
-    # per-constraint factors fixed over the frame: alpha~ = alpha / h^2
+    has_bodies = body_kinds.shape[0] > 0
     n_e = edges.shape[0]
-    e_alpha = np.empty(n_e)
-    e_scale = np.zeros(n_e)  # 1 / (w_i + w_j + alpha~)
-    lam = np.zeros(n_e)  # XPBD multipliers of the substep
-    for e in range(n_e):
-        e_alpha[e] = edge_compliance[e] * (inv_h * inv_h)
-        den = inv_mass[edges[e, 0]] + inv_mass[edges[e, 1]] + e_alpha[e]
-        if den > 0.0 and den < np.inf:
-            e_scale[e] = 1.0 / den
-    n_h = hinges.shape[0]
-    h_alpha = np.empty(n_h)
-    for b in range(n_h):
-        h_alpha[b] = hinge_compliance[b] * (inv_h * inv_h)
+    lam = scratch_lambda  # XPBD multipliers of the substep
     for _ in range(substeps):
-        for i in range(n):  # 1. v += h a ; p = x + h v
+        for i in range(n):  # 1. v += h a, a = g + f/m ; p = x + h v
             if inv_mass[i] > 0.0:
                 for k in range(3):
-                    vv[i, k] += h * accel[i, k]
+                    vv[i, k] += h * (gravity[k] + f_ext[i, k] * inv_mass[i])
                     p[i, k] = xp[i, k] + h * vv[i, k]
             else:
                 for k in range(3):
@@ -351,7 +356,7 @@ def xpbd_frame(
         for it in range(edge_iterations):
             # the first pass covers all edges, the further ones the stiff stretch edges only
             for e in range(n_e if it == 0 else n_stretch):  # 2a. C = |p_i - p_j| - L
-                if e_scale[e] == 0.0:
+                if edge_scale[e] == 0.0:
                     continue
                 i, j = edges[e, 0], edges[e, 1]
                 dx, dy, dz = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1], p[i, 2] - p[j, 2]
@@ -360,16 +365,16 @@ def xpbd_frame(
                     continue
                 inv_ln = 1.0 / ln
                 # dlambda = (-C - alpha~ lambda) / (w_i + w_j + alpha~)
-                dl = (edge_rest[e] - ln - e_alpha[e] * lam[e]) * e_scale[e]
+                dl = (edge_rest[e] - ln - edge_alpha[e] * lam[e]) * edge_scale[e]
                 lam[e] += dl
-                wi, wj = inv_mass[i] * dl * inv_ln, inv_mass[j] * dl * inv_ln
-                p[i, 0] += wi * dx
-                p[i, 1] += wi * dy
-                p[i, 2] += wi * dz
-                p[j, 0] -= wj * dx
-                p[j, 1] -= wj * dy
-                p[j, 2] -= wj * dz
-        for b in range(n_h):  # 2b. C = theta - theta_0
+                si, sj = inv_mass[i] * dl * inv_ln, inv_mass[j] * dl * inv_ln
+                p[i, 0] += si * dx
+                p[i, 1] += si * dy
+                p[i, 2] += si * dz
+                p[j, 0] -= sj * dx
+                p[j, 1] -= sj * dy
+                p[j, 2] -= sj * dz
+        for b in range(hinges.shape[0]):  # 2b. C = theta - theta_0
             project_hinge(
                 p,
                 inv_mass,
@@ -378,7 +383,7 @@ def xpbd_frame(
                 hinges[b, 2],
                 hinges[b, 3],
                 hinge_rest[b],
-                h_alpha[b],
+                hinge_alpha[b],
             )
         for i in range(n):  # 2c. long-range attachment: |p_i - x_anchor| <= L_i
             a = tether_anchor[i]
@@ -391,15 +396,35 @@ def xpbd_frame(
                 p[i, 0] = p[a, 0] + s * dx
                 p[i, 1] = p[a, 1] + s * dy
                 p[i, 2] = p[a, 2] + s * dz
-        if body_kinds.shape[0] > 0:  # 3. contacts
+        if has_bodies:  # 3. contacts, for vertices inside a body's grown bounding box
             for i in range(n):
-                if inv_mass[i] > 0.0:
+                if inv_mass[i] > 0.0 and near_a_body(body_boxes, p[i, 0], p[i, 1], p[i, 2]):
                     project_vertex(body_kinds, body_params, margin, friction, xp[i], p[i], normal)
         for i in range(n):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
                 vv[i, k] = (p[i, k] - xp[i, k]) * inv_h
                 xp[i, k] = p[i, k]
     damp_velocities(p, vv, inv_mass, edges, edge_damping, hinges, hinge_damping, dt)  # 5.
+    work = 0.0
+    energy = 0.0
+    finite = True
+    for i in range(n):
+        for k in range(3):
+            work += (f_ext[i, k] + mass[i] * gravity[k]) * (p[i, k] - x[i, k])
+            energy += 0.5 * mass[i] * vv[i, k] * vv[i, k]
+            finite = finite and math.isfinite(p[i, k]) and math.isfinite(vv[i, k])
+    return work, energy, finite
+
+
+@njit(cache=True)
+def max_edge_stretch(x, edges, rest):
+    """max_e |x_i - x_j| / L_e - 1 over the edges (i, j) of ``edges`` (as many as ``rest``)."""
+    top = -np.inf
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+        top = max(top, math.sqrt(dx * dx + dy * dy + dz * dz) / rest[e] - 1.0)
+    return top
 
 
 def _param(params, key, default=None):
@@ -502,11 +527,22 @@ class XPBDCloth:
             model.rest_positions, topo.edges, model.pinned
         )
         # Gauss-Seidel order: outwards from the pins, so that one pass carries a pin's hold
-        # down the cloth (measured: less stretch than mesh order at the same cost)
-        # (stretch edges first: the further edge passes cover them alone)
-        self.edge_order = np.lexsort((path[topo.edges].min(axis=1), topo.edge_shear))
+        # down the cloth (measured: less stretch than mesh order at the same cost); stretch
+        # edges first (the further edge passes cover them alone). Within a band of equal
+        # distance from the pins (one edge length wide) edges and hinges go by colour
+        # (colour_order): a third faster edge sweeps, the same stretch (measured: hanging
+        # 16x16 cloth 1.41% both, 32x32 6.35% vs 6.40%; flags in wind within +-4%).
+        step = topo.edge_length.min() if topo.edges.size else 1.0
+        near_e, near_h = path[topo.edges].min(axis=1), path[topo.hinges].min(axis=1)
+        band_e, band_h = (
+            np.where(np.isfinite(d), np.round(d / step), -1).astype(np.int64)
+            for d in (near_e, near_h)
+        )
+        self.edge_order, _ = colour_order(
+            topo.edges, near_e, topo.edge_shear * (band_e.max(initial=0) + 2) + band_e
+        )
         self.n_stretch = int(np.count_nonzero(~topo.edge_shear))
-        self.hinge_order = np.argsort(path[topo.hinges].min(axis=1), kind="stable")
+        self.hinge_order, _ = colour_order(topo.hinges, near_h, band_h)
         eo, ho = self.edge_order, self.hinge_order
         self._edge_arrays = tuple(
             np.ascontiguousarray(a[eo])
@@ -516,43 +552,77 @@ class XPBDCloth:
             np.ascontiguousarray(a[ho])
             for a in (topo.hinges, topo.hinge_angle, self.hinge_compliance, self.hinge_damping)
         )
+        self.body_boxes = body_boxes(tuple(bodies), self.margin)
+        self._constants_dt = None  # substep_constants cache
+        self._scratch_x = np.empty((model.n_vertices, 3))  # work space of xpbd_frame
+        self._scratch_lambda = np.empty(topo.edges.shape[0])
         self.steps = 0
         self.work_in = 0.0  # accumulated positive work of gravity and external forces, J
+
+    def substep_constants(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(edge alpha~, edge scale, hinge alpha~) for frames of length ``dt``, cached.
+
+        alpha~ = alpha / h^2 with h = dt / substeps; scale = 1 / (w_i + w_j + alpha~), 0 for
+        an edge that cannot move (two pins) or has zero stiffness (alpha~ infinite).
+        """
+        if self._constants_dt != dt:
+            inv_h = 1.0 / (dt / self.substeps)
+            edges, _, e_compliance, _ = self._edge_arrays
+            e_alpha = e_compliance * (inv_h * inv_h)
+            den = self.inv_mass[edges[:, 0]] + self.inv_mass[edges[:, 1]] + e_alpha
+            ok = (den > 0.0) & (den < np.inf)
+            e_scale = np.where(ok, 1.0 / np.where(ok, den, 1.0), 0.0)
+            h_alpha = self._hinge_arrays[2] * (inv_h * inv_h)
+            self._constants = (e_alpha, e_scale, h_alpha)
+            self._constants_dt = dt
+        return self._constants
 
     def step(self, state: ClothState, external_forces, dt: float) -> ClothState:
         """Advance all cloths by one frame ``dt`` under gravity and ``external_forces`` (N)."""
         self.steps += 1
         x = np.ascontiguousarray(state.positions, dtype=np.float64)
         v = np.ascontiguousarray(state.velocities, dtype=np.float64)
-        f = np.asarray(external_forces, dtype=np.float64).reshape(x.shape)
-        accel = np.ascontiguousarray(self.gravity + f * self.inv_mass[:, None])
+        f = np.ascontiguousarray(external_forces, dtype=np.float64).reshape(x.shape)
+        e_alpha, e_scale, h_alpha = self.substep_constants(float(dt))
+        edges, edge_rest, _, edge_damping = self._edge_arrays
+        hinges, hinge_rest, _, hinge_damping = self._hinge_arrays
         x_new = np.empty_like(x)
         v_new = np.empty_like(v)
-        xpbd_frame(
+        work, energy, finite = xpbd_frame(
             x,
             v,
+            f,
+            self.mass,
             self.inv_mass,
-            accel,
-            *self._edge_arrays,
-            *self._hinge_arrays,
+            self.gravity,
+            edges,
+            edge_rest,
+            e_alpha,
+            e_scale,
+            edge_damping,
+            self.n_stretch,
+            hinges,
+            hinge_rest,
+            h_alpha,
+            hinge_damping,
             self.tether_anchor,
             self.tether_length,
             self.body_kinds,
             self.body_params,
+            self.body_boxes,
             self.margin,
             self.friction,
             float(dt),
             self.substeps,
             self.edge_iterations,
-            self.n_stretch,
             x_new,
             v_new,
+            self._scratch_x,
+            self._scratch_lambda,
         )
-        if not (np.isfinite(x_new).all() and np.isfinite(v_new).all()):
+        if not finite:
             raise SimulationDiverged(self.steps, "cloth positions or velocities are not finite")
-        work = float(np.sum((f + self.mass[:, None] * self.gravity) * (x_new - x)))
         self.work_in += max(0.0, work)
-        energy = self.kinetic_energy(v_new)
         bound = self.energy_limit * self.work_in + 1e-9
         if energy > bound:
             raise SimulationDiverged(
@@ -568,18 +638,19 @@ class XPBDCloth:
 
     def max_stretch(self, positions) -> float:
         """Largest relative elongation of a stretch (warp/weft) edge, |x_i - x_j| / L - 1."""
-        e = self.topology.edges[self.stretch_edges]
-        if e.size == 0:
+        edges, rest = self._edge_arrays[0][: self.n_stretch], self._edge_arrays[1]
+        if edges.shape[0] == 0:
             return 0.0
-        length = np.linalg.norm(positions[e[:, 0]] - positions[e[:, 1]], axis=1)
-        return float(np.max(length / self.topology.edge_length[self.stretch_edges] - 1.0))
+        return float(max_edge_stretch(np.ascontiguousarray(positions, np.float64), edges, rest))
 
     def stats(self, state: ClothState) -> dict[str, float]:
         """Figures recorded per step: kinetic energy (J), deepest body penetration (m),
         largest stretch of a warp/weft edge (relative)."""
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
-            "max_penetration": max_penetration(self.body_kinds, self.body_params, state.positions),
+            "max_penetration": max_penetration(
+                self.body_kinds, self.body_params, self.body_boxes, state.positions
+            ),
             "max_stretch": self.max_stretch(state.positions),
         }
 

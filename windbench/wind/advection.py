@@ -17,21 +17,15 @@ keeps it stable); second order in space and time where the field is smooth.
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit, prange
 
 
 @njit(cache=True, inline="always")
 def _locate(p, origin, h, npad):
     """Lower lattice index and weight of coordinate p on a padded axis of npad samples."""
-    f = (p - origin) / h
-    i0 = int(np.floor(f))
-    if i0 < 0:
-        return 0, 0.0
-    if i0 > npad - 2:
-        return npad - 2, 1.0
-    t = f - i0
-    return i0, t
+    f = min(max((p - origin) / h, 0.0), npad - 1.0)  # clamped onto the lattice
+    i0 = min(int(f), npad - 2)
+    return i0, f - i0
 
 
 @njit(cache=True, inline="always")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.primitives import superpose
+from windbench.wind.primitives import parameter_table, superpose
 
 
 class GlobalWind(WindField):
@@ -19,7 +19,8 @@ class GlobalWind(WindField):
 
     def __init__(self, scene, grid, params):
         super().__init__(scene, grid, params)
-        self._field = superpose(scene.sources, grid.cell_centres())
+        self._table = parameter_table(scene.sources)  # model: built once, read every step
+        self._field = superpose(scene.sources, grid.cell_centres(), self._table)
         self._field.setflags(write=False)
 
     def step(self, dt: float, obstacles: Obstacles) -> None:
@@ -29,4 +30,4 @@ class GlobalWind(WindField):
         return self._field
 
     def sample(self, points) -> np.ndarray:
-        return superpose(self.scene.sources, np.atleast_2d(points))
+        return superpose(self.scene.sources, np.atleast_2d(points), self._table)

@@ -134,12 +134,15 @@ def parameter_table(primitives: Sequence[Primitive]) -> tuple[np.ndarray, np.nda
     return kinds, params
 
 
-def superpose(primitives: Sequence[Primitive], points) -> np.ndarray:
-    """w(x) = sum_i w_i(x) at world points ``(n, 3)`` (or a grid ``(..., 3)``)."""
+def superpose(primitives: Sequence[Primitive], points, table=None) -> np.ndarray:
+    """w(x) = sum_i w_i(x) at world points ``(n, 3)`` (or a grid ``(..., 3)``).
+
+    ``table``: the primitives' :func:`parameter_table`, when the caller keeps it.
+    """
     pts = np.asarray(points, dtype=np.float64)
     flat = np.ascontiguousarray(pts.reshape(-1, 3))
     out = np.zeros_like(flat)
-    kinds, params = parameter_table(primitives)
+    kinds, params = parameter_table(primitives) if table is None else table
     superposed_velocity(kinds, params, flat, out)
     return out.reshape(pts.shape)
 
