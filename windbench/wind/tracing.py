@@ -32,7 +32,7 @@ kernels run serially over the particles in their stored order, so a run is bit-f
 reproducible.
 
 Cost per step, none of it a pass over the grid: u is refreshed in a cell when a mark
-there changes (:func:`_mark`) and when its last marks lapse ``memory`` later
+there changes (in :func:`trace_gusts`) and when its last marks lapse ``memory`` later
 (:func:`expire_cells`, over the cells first marked that many steps before); a per-cell
 byte of flags (SOLID, BODIES, TRIANGLES) says where there is anything to test, and the
 cloth's cells are flagged and unflagged in O(overlaps) (:func:`register_cloth`). On
@@ -226,61 +226,6 @@ def _assemble_cell(c, marked, values, t_now, memory, u):
     u[c, 0] = ux
     u[c, 1] = uy
     u[c, 2] = uz
-
-
-@njit(cache=True, inline="always")
-def _mark(
-    kind,
-    prm,
-    normals,
-    n_normals,
-    lower,
-    h,
-    i,
-    j,
-    k,
-    cell,
-    s,
-    t_now,
-    memory,
-    flags,
-    marked,
-    values,
-    u,
-    wc,
-    touched,
-    n_touched,
-):
-    """Mark cell (i, j, k) (id ``cell``) for source s at t_now with w_i(centre), the first
-    n_normals contact normals removed, and refresh u there (in air cells only: a solid
-    cell keeps u = 0 and its value is not stored). A deflected mark (n_normals > 0) beats
-    a free one within a step. A cell's first mark of the step goes on the ``touched`` list
-    (whose marks expire ``memory`` later); returns (touched, n_touched)."""
-    first = marked[cell, s] != t_now
-    if not first and n_normals == 0:
-        # marked already this step: a free mark would repeat the same w_i(centre), and a
-        # deflected one beats it
-        return touched, n_touched
-    cx = lower[0] + (i + 0.5) * h
-    cy = lower[1] + (j + 0.5) * h
-    cz = lower[2] + (k + 0.5) * h
-    primitive_velocity(kind, prm, cx, cy, cz, wc)
-    for m in range(n_normals):
-        # w <- w - (n . w) n for each surface hit so far in this step
-        dn = wc[0] * normals[m, 0] + wc[1] * normals[m, 1] + wc[2] * normals[m, 2]
-        wc[0] -= dn * normals[m, 0]
-        wc[1] -= dn * normals[m, 1]
-        wc[2] -= dn * normals[m, 2]
-    marked[cell, s] = t_now
-    if not flags[cell] & SOLID:
-        values[cell, s, 0] = wc[0]
-        values[cell, s, 1] = wc[1]
-        values[cell, s, 2] = wc[2]
-        _assemble_cell(cell, marked, values, t_now, memory, u)
-    if first:
-        touched = _push(touched, n_touched, cell)
-        n_touched += 1
-    return touched, n_touched
 
 
 @intrinsic
@@ -512,29 +457,30 @@ def trace_gusts(
                         normals[n_marks] = hit_n
                         n_marks += 1
                 if marked[cell, s] != t_now or n_marks > 0:
-                    # (a free mark repeated within the step changes nothing)
-                    touched, n_touched = _mark(
-                        kind,
-                        prm,
-                        normals,
-                        n_marks,
-                        lower,
-                        h,
-                        i,
-                        j,
-                        k,
-                        cell,
-                        s,
-                        t_now,
-                        memory,
-                        flags,
-                        marked,
-                        values,
-                        u,
-                        wc,
-                        touched,
-                        n_touched,
-                    )
+                    # mark the cell for source s with w_i(centre), the contact normals of
+                    # the marking hits removed, and refresh u there (air cells only: a
+                    # solid cell keeps u = 0 and stores no value). A free mark repeated
+                    # within the step changes nothing; a deflected one beats a free one.
+                    first = marked[cell, s] != t_now
+                    cx = x0 + (i + 0.5) * h
+                    cy = y0 + (j + 0.5) * h
+                    cz = z0 + (k + 0.5) * h
+                    primitive_velocity(kind, prm, cx, cy, cz, wc)
+                    for m in range(n_marks):
+                        # w <- w - (n . w) n for each marking hit so far in this step
+                        dn = wc[0] * normals[m, 0] + wc[1] * normals[m, 1] + wc[2] * normals[m, 2]
+                        wc[0] -= dn * normals[m, 0]
+                        wc[1] -= dn * normals[m, 1]
+                        wc[2] -= dn * normals[m, 2]
+                    marked[cell, s] = t_now
+                    if not flags[cell] & SOLID:
+                        values[cell, s, 0] = wc[0]
+                        values[cell, s, 1] = wc[1]
+                        values[cell, s, 2] = wc[2]
+                        _assemble_cell(cell, marked, values, t_now, memory, u)
+                    if first:  # its marks lapse memory later: on the touched list
+                        touched = _push(touched, n_touched, cell)
+                        n_touched += 1
                 crossings += 1
                 if best <= 1.0:
                     # stop on the surface, lose the normal component: w - (n . w) n
