@@ -96,6 +96,7 @@ SORT_EVERY = 8  # steps between reorderings of the particles by cell (memory loc
 # Grids this large (cell state > 2 MB) prefetch the cells ahead of tracing while particles
 # are sparse (fewer than one per two cells); denser particles find their cells in cache.
 PREFETCH_CELLS = 1 << 16
+PREFETCH_DENSITY = 0.5  # particles per cell
 
 
 def _check(params) -> None:
@@ -145,7 +146,7 @@ class ParticleWind(WindField):
         self._max_age = float(params.max_age)
         self._max_hits = int(params.max_hits)
         self._mark_mode = MARK_MODES[params.deflected_cells]
-        self._big_grid = grid.n_cells >= PREFETCH_CELLS
+        self._big_grid = grid.n_cells >= PREFETCH_CELLS  # and particles sparse: prefetch
         self._seed = int(params.seed)
         # state
         n_sources = len(scene.sources)
@@ -279,7 +280,7 @@ class ParticleWind(WindField):
             CONTACT_OFFSET * self._h,
             self._max_hits,
             self._mark_mode,
-            self._big_grid and 2 * n_traced < self.grid.n_cells,  # prefetch when sparse
+            self._big_grid and n_traced < PREFETCH_DENSITY * self.grid.n_cells,
             self._pos,
             self._src,
             self._age,

@@ -229,17 +229,16 @@ def _assemble_cell(c, marked, values, t_now, memory, u):
 
 
 @intrinsic
-def _prefetch(typingctx, arr, i, j):
-    """Hint the CPU to fetch the cache line of ``arr[i, j]`` for writing (llvm.prefetch):
-    no effect on results, only on when memory is read."""
-    sig = types.void(arr, i, j)
+def _prefetch(typingctx, arr, index):
+    """Hint the CPU to fetch the cache line of ``arr[index]`` (index: a tuple) for writing
+    (llvm.prefetch): no effect on results, only on when memory is read."""
+    sig = types.void(arr, index)
 
     def codegen(context, builder, signature, args):
         aryty = signature.args[0]
         ary = context.make_array(aryty)(context, builder, args[0])
-        ptr = cgutils.get_item_pointer(
-            context, builder, aryty, ary, [args[1], args[2]], wraparound=False
-        )
+        indices = cgutils.unpack_tuple(builder, args[1])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, indices, wraparound=False)
         i8p = builder.bitcast(ptr, ir.IntType(8).as_pointer())
         i32 = ir.IntType(32)
         fnty = ir.FunctionType(ir.VoidType(), [i8p.type, i32, i32, i32])
@@ -251,7 +250,7 @@ def _prefetch(typingctx, arr, i, j):
 
 
 @njit(cache=True, inline="always")
-def _look_ahead(px, py, pz, w, tau, lower, h, shape, s, marked, u):
+def _look_ahead(px, py, pz, w, tau, lower, h, shape, s, flags, marked, u):
     """Prefetch the cell state at the start, middle and end of the path p -> p + w tau of
     a particle traced a few places later (the cells it will most likely mark)."""
     inv_h = 1.0 / h
@@ -261,8 +260,9 @@ def _look_ahead(px, py, pz, w, tau, lower, h, shape, s, marked, u):
         k = int(np.floor((pz + f * w[2] - lower[2]) * inv_h))
         if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
             c = (i * shape[1] + j) * shape[2] + k
-            _prefetch(marked, c, s)
-            _prefetch(u, c, 0)
+            _prefetch(flags, (c,))
+            _prefetch(marked, (c, s))
+            _prefetch(u, (c, 0))
 
 
 @njit(cache=True, inline="always")
@@ -369,6 +369,7 @@ def trace_gusts(
                     h,
                     shape,
                     sa,
+                    flags,
                     marked,
                     u,
                 )
@@ -550,7 +551,8 @@ def expire_cells(cells, t_mark, marked, values, flags, t_now, memory, u):
     """
     for m in range(cells.shape[0]):
         if m + AHEAD < cells.shape[0]:
-            _prefetch(marked, cells[m + AHEAD], 0)
+            _prefetch(marked, (cells[m + AHEAD], 0))
+            _prefetch(u, (cells[m + AHEAD], 0))
         c = cells[m]
         if flags[c] & SOLID:
             continue
