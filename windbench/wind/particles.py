@@ -147,7 +147,6 @@ class ParticleWind(WindField):
         self._max_hits = int(params.max_hits)
         self._mark_mode = MARK_MODES[params.deflected_cells]
         self._big_grid = grid.n_cells >= PREFETCH_CELLS  # and particles sparse: prefetch
-        self._seed = int(params.seed)
         # state
         n_sources = len(scene.sources)
         self.time = 0.0
