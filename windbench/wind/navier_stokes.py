@@ -151,11 +151,11 @@ def max_abs(q):
     return peak.max()
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def subtract_gradient(q, a, psi, free, periodic):
     """q_f -= psi_+ - psi_- on the free faces of component a (ghost psi = 0 at openings)."""
     nx, ny, nz = psi.shape
-    n = (nx, ny, nz)
+    n_a = psi.shape[a]
     P0, P1, P2 = q.shape
     for I in prange(1, P0 - 1):
         for J in range(1, P1 - 1):
@@ -163,14 +163,14 @@ def subtract_gradient(q, a, psi, free, periodic):
                 if not free[I, J, K]:
                     continue
                 ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
-                plus = 0.0
-                minus = 0.0
-                if (ip, jp, kp)[a] < n[a]:
-                    plus = psi[ip, jp, kp]
-                if (im, jm, km)[a] >= 0:
+                along = ip if a == 0 else (jp if a == 1 else kp)  # index of the + cell
+                plus = psi[ip, jp, kp] if along < n_a else 0.0
+                if along >= 1:
                     minus = psi[im, jm, km]
                 elif periodic[a]:
                     minus = psi[im % nx, jm % ny, km % nz]
+                else:
+                    minus = 0.0
                 q[I, J, K] -= plus - minus  # u_f <- u_f - (psi_+ - psi_-)
 
 
@@ -329,6 +329,7 @@ class NavierStokesWind(WindField):
         for a in range(3):
             boundaries.free_faces(a, self.kinds, self.solid, self.free_static[a])
         self.free = [f.copy() for f in self.free_static]
+        self.solid_faces = [self._faces_touching_solid(a) for a in range(3)]
         dirichlet = any(k in (OUTFLOW, OPENING) for k in self.kinds)
         self.poisson = MultigridPoisson(shape, self.periodic, singular=not dirichlet)
         self.weights = [np.zeros(w.shape) for w in self.poisson.fine.w]
@@ -400,6 +401,12 @@ class NavierStokesWind(WindField):
         self._apply_boundaries(set_normal=True)
         self._project()
 
+    def _faces_touching_solid(self, a) -> np.ndarray:
+        """Flat indices of the faces of component a next to a body (model: bodies are rigid)."""
+        probe = np.ones(self.q[a].shape)
+        boundaries.zero_solid_faces(probe, a, self.solid)
+        return np.flatnonzero(probe == 0.0)
+
     def _face_points(self, a) -> np.ndarray:
         shp = self.q[a].shape
         o = self.origins[a]
@@ -415,7 +422,7 @@ class NavierStokesWind(WindField):
 
     def _apply_boundaries(self, set_normal: bool):
         for a in range(3):
-            boundaries.zero_solid_faces(self.q[a], a, self.solid)
+            self.q[a].reshape(-1)[self.solid_faces[a]] = 0.0
             boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], set_normal)
         if self._blocked is not None and len(self._blocked[0]):
             rows, vals = self._blocked
