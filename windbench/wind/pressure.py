@@ -242,11 +242,16 @@ def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, coef, colour):
 
 
 @njit(cache=True)
-def gauss_seidel_serial(x, b, wx, wy, wz, periodic, uniform, coef, colour):
-    """:func:`gauss_seidel` on one thread (small levels: no thread start-up per sweep).
-    Cells of one colour do not neighbour each other, so the result is the same bits."""
-    for i in range(x.shape[0]):
-        _gs_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, colour)
+def gauss_seidel_serial(x, b, wx, wy, wz, periodic, uniform, coef, sweeps, reverse):
+    """``sweeps`` red-black sweeps (black first if ``reverse``) on one thread, in one call:
+    small levels, where a thread start-up or a Python call per half sweep costs more than
+    the work. Cells of one colour do not neighbour each other: the bits of
+    :func:`gauss_seidel`."""
+    for _ in range(sweeps):
+        for half in range(2):
+            colour = 1 - half if reverse else half
+            for i in range(x.shape[0]):
+                _gs_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, colour)
 
 
 @njit(cache=True)
@@ -417,9 +422,8 @@ class _Level:
         self.ratio = np.ones(3, dtype=np.int64)  # to the next coarser level
         self.uniform = np.zeros((nx, ny), dtype=np.bool_)  # see mark_uniform_rows
         # small levels run on one thread: a parallel launch costs more than the work there
-        small = np.prod(self.shape) < SERIAL_CELLS
-        self.gauss_seidel = gauss_seidel_serial if small else gauss_seidel
-        self.residual = residual_serial if small else residual
+        self.small = np.prod(self.shape) < SERIAL_CELLS
+        self.residual = residual_serial if self.small else residual
 
     def args(self):
         return (self.w[0], self.w[1], self.w[2], self.periodic, self.uniform, self.coef)
@@ -429,9 +433,12 @@ class _Level:
         uniform_rows(*self.w, self.coef, self.uniform)
 
     def smooth(self, x, b, sweeps, reverse):
+        if self.small:
+            gauss_seidel_serial(x, b, *self.args(), sweeps, reverse)
+            return
         for _ in range(sweeps):
             for colour in (1, 0) if reverse else (0, 1):
-                self.gauss_seidel(x, b, *self.args(), colour)
+                gauss_seidel(x, b, *self.args(), colour)
 
 
 class MultigridPoisson:
