@@ -95,22 +95,27 @@ DIFFUSION_MAX_SWEEPS = 500
 # ---------------------------------------------------------------- kernels (pure functions)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _outward_flux(u, v, w, i, j, k):
+    """Sum of the outward face velocities of cell (i, j, k) = h div u there (MAC)."""
+    return (
+        u[i + 2, j + 1, k + 1]
+        - u[i + 1, j + 1, k + 1]
+        + v[i + 1, j + 2, k + 1]
+        - v[i + 1, j + 1, k + 1]
+        + w[i + 1, j + 1, k + 2]
+        - w[i + 1, j + 1, k + 1]
+    )
+
+
+@njit(cache=True, parallel=True)
 def face_flux(u, v, w, target, out):
     """out_c = h div u - target_c = sum of outward face velocities of cell c - target_c."""
     nx, ny, nz = out.shape
     for i in prange(nx):
         for j in range(ny):
             for k in range(nz):
-                out[i, j, k] = (
-                    u[i + 2, j + 1, k + 1]
-                    - u[i + 1, j + 1, k + 1]
-                    + v[i + 1, j + 2, k + 1]
-                    - v[i + 1, j + 1, k + 1]
-                    + w[i + 1, j + 1, k + 2]
-                    - w[i + 1, j + 1, k + 1]
-                    - target[i, j, k]
-                )
+                out[i, j, k] = _outward_flux(u, v, w, i, j, k) - target[i, j, k]
 
 
 @njit(cache=True, parallel=True)
@@ -125,15 +130,7 @@ def divergence_norms(u, v, w, target, solid):
             for k in range(nz):
                 if solid[i, j, k]:
                     continue
-                d = abs(
-                    u[i + 2, j + 1, k + 1]
-                    - u[i + 1, j + 1, k + 1]
-                    + v[i + 1, j + 2, k + 1]
-                    - v[i + 1, j + 1, k + 1]
-                    + w[i + 1, j + 1, k + 2]
-                    - w[i + 1, j + 1, k + 1]
-                    - target[i, j, k]
-                )
+                d = abs(_outward_flux(u, v, w, i, j, k) - target[i, j, k])
                 peak[i] = max(peak[i], d)
                 squares[i] += d * d
                 count[i] += 1

@@ -40,6 +40,27 @@ PRE_SWEEPS = 2  # per level and direction: 6-7 iterations to 1e-6 at 32^3..128^3
 
 
 @njit(cache=True, inline="always")
+def _cell_face_weights(wx, wy, wz, i, j, k):
+    """The six face weights of cell (i, j, k): -x, +x, -y, +y, -z, +z."""
+    return wx[i, j, k], wx[i + 1, j, k], wy[i, j, k], wy[i, j + 1, k], wz[i, j, k], wz[i, j, k + 1]
+
+
+@njit(cache=True, inline="always")
+def _interior_sum(x, wx, wy, wz, i, j, k):
+    """(sum_f w_f x_nb, diag) at a cell none of whose neighbours is outside the grid."""
+    w0, w1, w2, w3, w4, w5 = _cell_face_weights(wx, wy, wz, i, j, k)
+    s = (
+        w0 * x[i - 1, j, k]
+        + w1 * x[i + 1, j, k]
+        + w2 * x[i, j - 1, k]
+        + w3 * x[i, j + 1, k]
+        + w4 * x[i, j, k - 1]
+        + w5 * x[i, j, k + 1]
+    )
+    return s, w0 + w1 + w2 + w3 + w4 + w5
+
+
+@njit(cache=True, inline="always")
 def _nb_sum(x, wx, wy, wz, periodic, i, j, k):
     """(sum_f w_f x_nb, diag = sum_f w_f) around cell (i, j, k); ghost x = 0 outside.
 
@@ -47,23 +68,9 @@ def _nb_sum(x, wx, wy, wz, periodic, i, j, k):
     path (a closed face has w = 0, so it drops out of both sums).
     """
     nx, ny, nz = x.shape
-    w0 = wx[i, j, k]
-    w1 = wx[i + 1, j, k]
-    w2 = wy[i, j, k]
-    w3 = wy[i, j + 1, k]
-    w4 = wz[i, j, k]
-    w5 = wz[i, j, k + 1]
-    d = w0 + w1 + w2 + w3 + w4 + w5
     if 0 < i < nx - 1 and 0 < j < ny - 1 and 0 < k < nz - 1:
-        s = (
-            w0 * x[i - 1, j, k]
-            + w1 * x[i + 1, j, k]
-            + w2 * x[i, j - 1, k]
-            + w3 * x[i, j + 1, k]
-            + w4 * x[i, j, k - 1]
-            + w5 * x[i, j, k + 1]
-        )
-        return s, d
+        return _interior_sum(x, wx, wy, wz, i, j, k)
+    w0, w1, w2, w3, w4, w5 = _cell_face_weights(wx, wy, wz, i, j, k)
     s = 0.0
     if i > 0:
         s += w0 * x[i - 1, j, k]
@@ -89,26 +96,6 @@ def _nb_sum(x, wx, wy, wz, periodic, i, j, k):
         s += w5 * x[i, j, k + 1]
     elif periodic[2]:
         s += w5 * x[i, j, 0]
-    return s, d
-
-
-@njit(cache=True, inline="always")
-def _interior_sum(x, wx, wy, wz, i, j, k):
-    """(sum_f w_f x_nb, diag) at a cell none of whose neighbours is outside the grid."""
-    w0 = wx[i, j, k]
-    w1 = wx[i + 1, j, k]
-    w2 = wy[i, j, k]
-    w3 = wy[i, j + 1, k]
-    w4 = wz[i, j, k]
-    w5 = wz[i, j, k + 1]
-    s = (
-        w0 * x[i - 1, j, k]
-        + w1 * x[i + 1, j, k]
-        + w2 * x[i, j - 1, k]
-        + w3 * x[i, j + 1, k]
-        + w4 * x[i, j, k - 1]
-        + w5 * x[i, j, k + 1]
-    )
     return s, w0 + w1 + w2 + w3 + w4 + w5
 
 
