@@ -91,8 +91,8 @@ def test_hoerner_long_plate_and_the_model_at_normal_incidence():
 
 
 def test_flatten_config_keys():
-    flat = flatten({"a": {"b": 1, "c": [1, 2]}, "d": "x"})
-    assert flat == {"a.b": 1, "a.c": (1, 2), "d": "x"}
+    flat = flatten({"a": {"b": 1, "c": [1, 2]}, "d": "x", "e": [{"r": [4, 5]}, {"r": [6]}]})
+    assert flat == {"a.b": 1, "a.c": (1, 2), "d": "x", "e.0.r": (4, 5), "e.1.r": (6,)}
 
 
 def _field_dataset(scene: str, wind: np.ndarray | None = None) -> xr.Dataset:
@@ -150,3 +150,8 @@ def test_swept_keys_are_the_settings_plus_config_keys_that_vary():
     dims = swept_keys(runs)
     # scene contents follow from the scene; resolution is a canonical setting already
     assert dims == ["wind", "scene", "resolution", "dt", "seed", "aero.lift_coefficient"]
+    # ... unless a scene key is swept within one scene (experiment=scaling_cloth)
+    cloth = [rec(0.3, (8, 4, 4), 16) for _ in range(2)]
+    for r, size in zip(cloth, ((40, 25), (64, 64)), strict=True):
+        r.config["scene.cloths.0.resolution"] = size
+    assert swept_keys(cloth)[-1] == "scene.cloths.0.resolution"

@@ -144,11 +144,16 @@ def find_runs(inputs: Iterable, filename: str = RUN_FILE) -> list[Path]:
 
 
 def flatten(tree, prefix: str = "") -> dict:
-    """Nested dicts -> {dotted.key: value}; lists become tuples (hashable)."""
+    """Nested dicts -> {dotted.key: value}; a list of dicts (the scene's cloths, bodies)
+    -> one key per entry and field (``scene.cloths.0.resolution``); other lists become
+    tuples (hashable)."""
     out = {}
     if isinstance(tree, dict):
         for k, v in tree.items():
             out.update(flatten(v, f"{prefix}{k}."))
+    elif isinstance(tree, list) and tree and all(isinstance(v, dict) for v in tree):
+        for n, v in enumerate(tree):
+            out.update(flatten(v, f"{prefix}{n}."))
     elif isinstance(tree, list):
         out[prefix[:-1]] = tuple(
             tuple(v) if isinstance(v, list) else (str(v) if isinstance(v, dict) else v)
@@ -348,7 +353,9 @@ def _setting(rec: RunRecord, name: str):
 
 def swept_keys(records: Sequence[RunRecord]) -> list[str]:
     """The dimensions: :data:`SETTINGS`, then every other config key that all complete runs
-    have and that takes more than one value among them (e.g. ``aero.lift_coefficient``)."""
+    have and that takes more than one value among them (e.g. ``aero.lift_coefficient``).
+    A ``scene.*`` key counts only if it varies among runs of one scene (e.g. a swept
+    ``scene.cloths.0.resolution``): otherwise it follows from the scene's name."""
     complete = [r for r in records if r.status in ("complete", "duplicate")]
     extra = []
     if complete:
@@ -356,11 +363,24 @@ def swept_keys(records: Sequence[RunRecord]) -> list[str]:
         for r in complete[1:]:
             common &= set(r.config)
         for key in sorted(common):
-            if key in SETTINGS.values() or key.startswith(IGNORED) or key in IGNORED:
+            if key in SETTINGS.values() or key in IGNORED:
+                continue
+            if key.startswith("scene."):
+                if _varies_within_a_scene(complete, key):
+                    extra.append(key)
+                continue
+            if key.startswith(IGNORED):
                 continue
             if len({repr(r.config[key]) for r in complete}) > 1:
                 extra.append(key)
     return list(SETTINGS) + extra
+
+
+def _varies_within_a_scene(records: Sequence[RunRecord], key: str) -> bool:
+    values: dict[str, set[str]] = {}
+    for r in records:
+        values.setdefault(str(r.settings.get("scene")), set()).add(repr(r.config[key]))
+    return any(len(v) > 1 for v in values.values())
 
 
 def summary_frame(records: Sequence[RunRecord]) -> pd.DataFrame:
