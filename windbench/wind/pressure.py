@@ -25,8 +25,9 @@ weight change (:func:`uniform_rows`); the smoother, residual and operator use th
 7-point stencil there, without reading any weight, and the general weighted stencil with
 bound and periodic checks only on boundary rows and cells. CG's vector updates are fused
 (:func:`cg_update`) and every reduction sums by planes, then over planes in order, so the
-numbers do not depend on the thread count. Without any pressure boundary (all walls/periodic) the constant is removed from the
-right-hand side and from every preconditioned residual. Convergence: ||r||_2 <= tol
+numbers do not depend on the thread count. Without any pressure boundary (all
+walls/periodic) the constant is removed from the right-hand side and from every
+preconditioned residual. Convergence: ||r||_2 <= tol
 ||b||_2 (relative residual), warm-started from the previous step's pressure.
 """
 
@@ -273,7 +274,7 @@ def uniform_rows(wx, wy, wz, coef, out):
 
 @njit(cache=True, parallel=True)
 def restrict_mean(fine, ratio, coarse):
-    """coarse[I,J,K] = mean of the fine cells it covers."""
+    """coarse[I,J,K] = mean of the fine cells it covers (ratio 1 or 2 per axis)."""
     n0, n1, n2 = coarse.shape
     r0, r1, r2 = ratio[0], ratio[1], ratio[2]
     inv = 1.0 / (r0 * r1 * r2)
@@ -294,7 +295,7 @@ def restrict_mean(fine, ratio, coarse):
 
 @njit(cache=True, parallel=True)
 def prolong_add(coarse, ratio, fine):
-    """fine += coarse value of the parent cell (injection)."""
+    """fine += coarse value of the parent cell (injection; ratio 1 or 2 per axis)."""
     n0, n1, n2 = fine.shape
     r0, r1, r2 = ratio[0], ratio[1], ratio[2]
     for i in prange(n0):

@@ -1,0 +1,144 @@
+"""Pressure-solver kernels (windbench.wind.pressure) and the implicit diffusion's stopping
+rule, against answers known without the code: the operator A x = sum_f w_f (x_c - x_nb)
+written out with numpy, numpy's dot product, and a diffusion solve converged far below
+its tolerance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from windbench.wind import pressure
+from windbench.wind.ns_problems import backend
+from windbench.wind.pressure import _Level
+
+SHAPE = (10, 8, 12)
+
+
+def _level(rng, periodic=(False, False, False)) -> _Level:
+    """A level with open faces except a closed block (a body) and closed domain walls."""
+    lev = _Level(SHAPE, np.ones(3), np.array(periodic))
+    for a in range(3):
+        lev.w[a][...] = 1.0
+        if not periodic[a]:
+            lo = [slice(None)] * 3
+            lo[a] = 0
+            lev.w[a][tuple(lo)] = 0.0
+    lev.w[0][3:5, 2:5, 4:9] = 0.0  # a closed patch of x faces: rows off the fast path
+    lev.w[2][6:8, 1:3, 2:6] = rng.random((2, 2, 4))  # fractional (coarse-level-like) weights
+    lev.mark_uniform_rows()
+    return lev
+
+
+def _operator_numpy(x, w, periodic):
+    """A x = sum_f w_f (x_c - x_nb), ghost x = 0 outside a non-periodic axis."""
+    out = np.zeros_like(x)
+    for a in range(3):
+        n = x.shape[a]
+        for side in (0, 1):  # the - face (index i) and the + face (index i + 1) of cell i
+            wf = np.take(w[a], np.arange(n) + side, axis=a)
+            shift = -1 if side == 0 else 1
+            nb = np.roll(x, -shift, axis=a)
+            if not periodic[a]:
+                edge = [slice(None)] * 3
+                edge[a] = 0 if side == 0 else n - 1
+                nb[tuple(edge)] = 0.0
+            out += wf * (x - nb)
+    return out
+
+
+@pytest.mark.parametrize("periodic", [(False, False, False), (True, False, True)])
+def test_operator_and_residual_match_the_stencil_written_out(periodic):
+    rng = np.random.default_rng(0)
+    lev = _level(rng, periodic)
+    assert 0 < lev.uniform.mean() < 1  # both paths are exercised
+    x, b = rng.random(SHAPE), rng.random(SHAPE)
+    expected = _operator_numpy(x, lev.w, periodic)
+    out = np.empty(SHAPE)
+    pressure.apply_operator(x, *lev.args(), out)
+    np.testing.assert_allclose(out, expected, rtol=1e-13, atol=1e-13)
+    pressure.residual(x, b, *lev.args(), out)
+    np.testing.assert_allclose(out, b - expected, rtol=1e-13, atol=1e-13)
+    pressure.residual_serial(x, b, *lev.args(), out)
+    np.testing.assert_allclose(out, b - expected, rtol=1e-13, atol=1e-13)
+
+
+def test_uniform_rows_are_exactly_the_all_open_interior_rows():
+    lev = _level(np.random.default_rng(1))
+    w0, w1, w2 = lev.w
+    inner = slice(1, SHAPE[2] - 1)
+    expected = np.zeros(SHAPE[:2], bool)
+    for i in range(1, SHAPE[0] - 1):
+        for j in range(1, SHAPE[1] - 1):
+            faces = (
+                w0[i, j, inner],
+                w0[i + 1, j, inner],
+                w1[i, j, inner],
+                w1[i, j + 1, inner],
+                w2[i, j, 1 : SHAPE[2] - 1],
+                w2[i, j, 2 : SHAPE[2]],
+            )
+            expected[i, j] = all(np.all(f == 1.0) for f in faces)
+    np.testing.assert_array_equal(lev.uniform, expected)
+
+
+def test_gauss_seidel_fast_path_and_serial_sweeps_solve_the_same_cells():
+    """A red half sweep sets each red cell to (b + sum w x_nb) / diag with black neighbours
+    unchanged; the serial multi-sweep kernel gives the same numbers as the parallel one."""
+    rng = np.random.default_rng(2)
+    lev = _level(rng)
+    x0, b = rng.random(SHAPE), rng.random(SHAPE)
+    x = x0.copy()
+    pressure.gauss_seidel(x, b, *lev.args(), 0)
+    diag = sum(  # sum_f w_f: the diagonal of A
+        np.take(lev.w[a], np.arange(SHAPE[a]) + s, axis=a) for a in range(3) for s in (0, 1)
+    )
+    red = (np.indices(SHAPE).sum(axis=0) % 2) == 0
+    nb_sum = diag * x0 - _operator_numpy(x0, lev.w, (False,) * 3)
+    expected = np.where(red & (diag > 0), (b + nb_sum) / np.where(diag > 0, diag, 1.0), x0)
+    np.testing.assert_allclose(x, expected, rtol=1e-13, atol=1e-13)
+    parallel, serial = x0.copy(), x0.copy()
+    for colour in (1, 0, 1, 0):
+        pressure.gauss_seidel(parallel, b, *lev.args(), colour)
+    pressure.gauss_seidel_serial(serial, b, *lev.args(), 2, True)
+    np.testing.assert_array_equal(parallel, serial)
+
+
+def test_dot_and_cg_update_match_numpy():
+    rng = np.random.default_rng(3)
+    p, q, x, r = (rng.random(SHAPE) for _ in range(4))
+    assert pressure.dot(p, q) == pytest.approx(float(np.sum(p * q)), rel=1e-13)
+    x_ref, r_ref = x + 0.3 * p, r - 0.3 * q
+    rr = pressure.cg_update(0.3, p, q, x, r)
+    np.testing.assert_allclose(x, x_ref, rtol=1e-15)
+    np.testing.assert_allclose(r, r_ref, rtol=1e-15)
+    assert rr == pytest.approx(float(np.sum(r_ref**2)), rel=1e-13)
+
+
+def test_diffusion_stops_within_its_error_bound_of_the_exact_implicit_solve():
+    """The contraction bound rho / (1 - rho) x last update: the solve stopped at
+    ``diffusion_tol`` lies within tol x scale of the same solve converged to 1e-15."""
+    spec = dict(
+        name="shear",
+        domain={"min": [0, 0, 0], "max": [2.0, 1.0, 1.0]},
+        boundary=dict(
+            x_min="inflow",
+            x_max="outflow",
+            y_min="no_slip",
+            y_max="slip",
+            z_min="slip",
+            z_max="slip",
+        ),
+        sources=[{"type": "uniform", "velocity": [2.0, 0.0, 0.0]}],
+        reference_speed=2.0,
+    )
+    tol, dt = 1e-6, 0.05
+    loose = backend(spec, 16, viscosity=0.02, diffusion_tol=tol)
+    tight = backend(spec, 16, viscosity=0.02, diffusion_tol=1e-15)
+    for a in range(3):
+        tight.q[a][...] = loose.q[a]
+    sweeps = loose._diffuse(dt)
+    assert tight._diffuse(dt) > sweeps >= 1
+    scale = max(max(np.abs(x).max() for x in tight.q), 2.0)
+    error = max(np.abs(lo - ti).max() for lo, ti in zip(loose.q, tight.q, strict=True))
+    assert 0 < error <= tol * scale
