@@ -138,6 +138,12 @@ def test_cfl_above_the_backend_range_warns(caplog):
     assert "CFL number 6 exceeds 5, the stable range of backend navier_stokes" in caplog.text
 
 
+def test_still_air_has_cfl_zero():
+    """A scene without sources or moving walls (cloth hanging in still air) is valid."""
+    setup = prepare(compose_config(["scene=flag", "scene.sources=[]", "grid.resolution=8"]))
+    assert setup.cfl == 0.0
+
+
 def test_cfl_is_reported_in_the_dataset(run_config):
     _, ds = run_config(["scene=empty", "grid.resolution=8", "sim.duration=0.05"])
     assert ds.attrs["cfl"] == pytest.approx(6.0 * (1 / 60) / 0.5)
