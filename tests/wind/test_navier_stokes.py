@@ -278,3 +278,19 @@ def test_same_input_same_numbers_bit_for_bit():
             wind.step(0.05, sheet_obstacles())
         runs.append(wind.velocity().copy())
     assert np.array_equal(runs[0], runs[1])
+
+
+def test_diffusion_stops_within_its_error_bound_of_the_exact_implicit_solve():
+    """The contraction bound rho / (1 - rho) x last update: the solve stopped at
+    ``diffusion_tol`` lies within tol x scale of the same solve converged to 1e-15."""
+    boundary = dict(CASES["inflow_outflow_body"][0])
+    tol, dt = 1e-6, 0.05
+    loose = make(box_scene(boundary, [UNIFORM]), 16, viscosity=0.05, diffusion_tol=tol)
+    tight = make(box_scene(boundary, [UNIFORM]), 16, viscosity=0.05, diffusion_tol=1e-15)
+    for a in range(3):
+        tight.q[a][...] = loose.q[a]
+    sweeps = loose._diffuse(dt)
+    assert tight._diffuse(dt) > sweeps >= 1
+    scale = max(max(np.abs(x).max() for x in tight.q), 2.0)
+    error = max(np.abs(lo - ti).max() for lo, ti in zip(loose.q, tight.q, strict=True))
+    assert 0 < error <= tol * scale

@@ -1,7 +1,6 @@
-"""Pressure-solver kernels (windbench.wind.pressure) and the implicit diffusion's stopping
-rule, against answers known without the code: the operator A x = sum_f w_f (x_c - x_nb)
-written out with numpy, numpy's dot product, and a diffusion solve converged far below
-its tolerance."""
+"""Pressure-solver kernels (windbench.wind.pressure) against answers known without the
+code: the operator A x = sum_f w_f (x_c - x_nb) written out with numpy, a Gauss-Seidel
+update solved by hand, numpy's dot product."""
 
 from __future__ import annotations
 
@@ -9,7 +8,6 @@ import numpy as np
 import pytest
 
 from windbench.wind import pressure
-from windbench.wind.ns_problems import backend
 from windbench.wind.pressure import _Level
 
 SHAPE = (10, 8, 12)
@@ -113,32 +111,3 @@ def test_dot_and_cg_update_match_numpy():
     np.testing.assert_allclose(x, x_ref, rtol=1e-15)
     np.testing.assert_allclose(r, r_ref, rtol=1e-15)
     assert rr == pytest.approx(float(np.sum(r_ref**2)), rel=1e-13)
-
-
-def test_diffusion_stops_within_its_error_bound_of_the_exact_implicit_solve():
-    """The contraction bound rho / (1 - rho) x last update: the solve stopped at
-    ``diffusion_tol`` lies within tol x scale of the same solve converged to 1e-15."""
-    spec = dict(
-        name="shear",
-        domain={"min": [0, 0, 0], "max": [2.0, 1.0, 1.0]},
-        boundary=dict(
-            x_min="inflow",
-            x_max="outflow",
-            y_min="no_slip",
-            y_max="slip",
-            z_min="slip",
-            z_max="slip",
-        ),
-        sources=[{"type": "uniform", "velocity": [2.0, 0.0, 0.0]}],
-        reference_speed=2.0,
-    )
-    tol, dt = 1e-6, 0.05
-    loose = backend(spec, 16, viscosity=0.02, diffusion_tol=tol)
-    tight = backend(spec, 16, viscosity=0.02, diffusion_tol=1e-15)
-    for a in range(3):
-        tight.q[a][...] = loose.q[a]
-    sweeps = loose._diffuse(dt)
-    assert tight._diffuse(dt) > sweeps >= 1
-    scale = max(max(np.abs(x).max() for x in tight.q), 2.0)
-    error = max(np.abs(lo - ti).max() for lo, ti in zip(loose.q, tight.q, strict=True))
-    assert 0 < error <= tol * scale
