@@ -8,11 +8,11 @@ solved by red-black Gauss-Seidel until the error bound of a contraction, rho / (
 times the largest update of the last sweep, is below ``tol`` times the field's scale:
 the Jacobi factor rho = 2 alpha d / (1 + 2 alpha d) (d active axes) bounds the max-norm
 contraction of a Gauss-Seidel sweep on this diagonally dominant M-matrix
-(:func:`error_bound_factor`). The ghost layer carries the boundary conditions (no-slip: ghost = 2 U_wall
-- interior, i.e. the wall value sits on the wall; slip/outflow: zero normal gradient), and
-is refilled after every half sweep so the boundary condition is implicit too. Faces whose
-value is prescribed (normal faces on walls and inflow, faces touching a body, cloth-
-blocked faces) are not updated. Unconditionally stable: the matrix is diagonally dominant.
+(:func:`error_bound_factor`). The ghost layer carries the boundary conditions (no-slip:
+ghost = 2 U_wall - interior, i.e. the wall value sits on the wall; slip/outflow: zero
+normal gradient), and is refilled after every half sweep so the boundary condition is
+implicit too. Faces whose value is prescribed (normal faces on walls and inflow, faces
+touching a body, cloth-blocked faces) are not updated. Unconditionally stable: the matrix is diagonally dominant.
 """
 
 from __future__ import annotations

@@ -27,8 +27,8 @@ bound and periodic checks only on boundary rows and cells. CG's vector updates a
 (:func:`cg_update`) and every reduction sums by planes, then over planes in order, so the
 numbers do not depend on the thread count. Without any pressure boundary (all
 walls/periodic) the constant is removed from the right-hand side and from every
-preconditioned residual. Convergence: ||r||_2 <= tol
-||b||_2 (relative residual), warm-started from the previous step's pressure.
+preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2 (relative residual),
+warm-started from the previous step's pressure.
 """
 
 from __future__ import annotations
