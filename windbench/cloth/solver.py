@@ -89,7 +89,7 @@ from numba import njit
 
 from windbench.cloth.collision import body_boxes, max_penetration, near_a_body, project_vertex
 from windbench.cloth.model import ClothModel, ClothState
-from windbench.cloth.topology import build_topology, colour_order, tethers
+from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import body_table
 
@@ -235,6 +235,58 @@ def project_hinge(p, inv_mass, i0, i1, i2, i3, rest, alpha):
     p[i3, 2] += f3 * nbz
 
 
+@njit(cache=True, inline="always")
+def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, work):
+    """One direct XPBD solve of each chain of distance constraints, in place.
+
+    Chain c (``chain_ptr``, ``chain_vert`` of :func:`~windbench.cloth.topology.thread_chains`)
+    is the path v_0 .. v_m of its edges e_k = (v_k, v_k+1), C_k = |p_v(k+1) - p_v(k)| - L_k,
+    grad C_k = +-n_k (n_k the unit edge direction). The linearised XPBD system of the chain,
+    ``(J W J^T + alpha~) dlambda = -C - alpha~ lambda``, is tridiagonal: diagonal
+    ``w_k + w_k+1 + alpha~_k``, off-diagonal ``-w_v(k+1) n_k . n_k+1`` between consecutive
+    edges; the Thomas algorithm solves it exactly in O(m) (no pivoting: the matrix is
+    diagonally dominant), then ``p_v += w_v sum_k dlambda_k grad_v C_k``. An edge with
+    ``scale`` 0 (two pins, zero stiffness) or zero length is an identity row (dlambda 0).
+    A chain of one edge is the plain XPBD edge projection. ``work`` (E, 5): n, c', r'.
+    """
+    for c in range(chain_ptr.shape[0] - 1):
+        e0, e1 = chain_ptr[c], chain_ptr[c + 1]
+        inv_den = 0.0  # 1 / pivot of the previous row
+        for e in range(e0, e1):  # forward elimination
+            a, b = chain_vert[e + c], chain_vert[e + c + 1]
+            dx, dy, dz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+            ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if scale[e] == 0.0 or ln == 0.0:  # identity row
+                work[e, 0] = work[e, 1] = work[e, 2] = 0.0
+                diag, rhs = 1.0, 0.0
+            else:
+                inv_ln = 1.0 / ln
+                work[e, 0], work[e, 1], work[e, 2] = dx * inv_ln, dy * inv_ln, dz * inv_ln
+                diag = inv_mass[a] + inv_mass[b] + alpha[e]
+                rhs = rest[e] - ln - alpha[e] * lam[e]  # -C - alpha~ lambda
+            if e > e0:  # off-diagonal -w_a n_(k-1) . n_k with the previous edge
+                off = -inv_mass[a] * (
+                    work[e - 1, 0] * work[e, 0]
+                    + work[e - 1, 1] * work[e, 1]
+                    + work[e - 1, 2] * work[e, 2]
+                )
+                cp = off * inv_den  # c'_(k-1)
+                work[e - 1, 3] = cp
+                diag -= off * cp
+                rhs -= off * work[e - 1, 4]
+            inv_den = 1.0 / diag
+            work[e, 4] = rhs * inv_den  # r'_k
+        dl = 0.0
+        for e in range(e1 - 1, e0 - 1, -1):  # back substitution and the position update
+            dl = work[e, 4] if e == e1 - 1 else work[e, 4] - work[e, 3] * dl
+            lam[e] += dl
+            a, b = chain_vert[e + c], chain_vert[e + c + 1]
+            sa, sb = inv_mass[a] * dl, inv_mass[b] * dl
+            for k in range(3):
+                p[b, k] += sb * work[e, k]
+                p[a, k] -= sa * work[e, k]
+
+
 @njit(cache=True)
 def damp_velocities(x, v, inv_mass, edges, edge_c, hinges, hinge_c, dt):
     """Stiffness-proportional (Rayleigh) damping of the frame's velocities, in place.
@@ -300,6 +352,8 @@ def xpbd_frame(
     edge_scale,
     edge_damping,
     n_stretch,
+    chain_ptr,
+    chain_vert,
     hinges,
     hinge_rest,
     hinge_alpha,
@@ -318,6 +372,7 @@ def xpbd_frame(
     v_out,
     scratch_x,
     scratch_lambda,
+    scratch_chain,
 ):
     """One frame of ``substeps`` XPBD substeps (module docstring, steps 1-5), one call.
 
@@ -353,9 +408,22 @@ def xpbd_frame(
                     vv[i, k] = 0.0
                     p[i, k] = xp[i, k]
         lam[:] = 0.0
-        for it in range(edge_iterations):
-            # the first pass covers all edges, the further ones the stiff stretch edges only
-            for e in range(n_e if it == 0 else n_stretch):  # 2a. C = |p_i - p_j| - L
+        for it in range(edge_iterations):  # 2a. C = |p_i - p_j| - L
+            # the stretch edges thread by thread, each thread solved directly
+            solve_chains(
+                p,
+                inv_mass,
+                chain_ptr,
+                chain_vert,
+                edge_rest,
+                edge_alpha,
+                edge_scale,
+                lam,
+                scratch_chain,
+            )
+            if it > 0:
+                continue
+            for e in range(n_stretch, n_e):  # the first pass also the shear edges, one by one
                 if edge_scale[e] == 0.0:
                     continue
                 i, j = edges[e, 0], edges[e, 1]
@@ -489,6 +557,10 @@ class XPBDCloth:
                 "cloth.edge_iterations", f"must be an integer >= 1, got {iterations!r}"
             )
         self.edge_iterations = iterations
+        threads = _param(params, "threads", True)
+        if not isinstance(threads, bool):
+            raise ConfigError("cloth.threads", f"must be true or false, got {threads!r}")
+        self.threads = threads
         g = _number(_param(params, "gravity", 9.81), "cloth.gravity", False)
         self.gravity = np.array([0.0, 0.0, -g])  # z is up
         self.margin = _number(
@@ -542,6 +614,17 @@ class XPBDCloth:
             topo.edges, near_e, topo.edge_shear * (band_e.max(initial=0) + 2) + band_e
         )
         self.n_stretch = int(np.count_nonzero(~topo.edge_shear))
+        stretch = self.edge_order[: self.n_stretch]
+        if self.threads:  # the stretch edges thread by thread (solve_chains), pins first
+            order, self.chain_ptr, self.chain_vert = thread_chains(
+                model.rest_positions, topo.edges[stretch], near_e[stretch]
+            )
+            self.edge_order = np.concatenate([stretch[order], self.edge_order[self.n_stretch :]])
+        else:  # every stretch edge a chain of its own: edge-by-edge Gauss-Seidel
+            self.chain_ptr = np.arange(self.n_stretch + 1, dtype=np.int64)
+            self.chain_vert = np.empty(2 * self.n_stretch, dtype=np.int64)
+            self.chain_vert[0::2] = topo.edges[stretch, 0]
+            self.chain_vert[1::2] = topo.edges[stretch, 1]
         self.hinge_order, _ = colour_order(topo.hinges, near_h, band_h)
         eo, ho = self.edge_order, self.hinge_order
         self._edge_arrays = tuple(
@@ -556,6 +639,7 @@ class XPBDCloth:
         self._constants_dt = None  # substep_constants cache
         self._scratch_x = np.empty((model.n_vertices, 3))  # work space of xpbd_frame
         self._scratch_lambda = np.empty(topo.edges.shape[0])
+        self._scratch_chain = np.empty((self.n_stretch, 5))
         self.steps = 0
         self.work_in = 0.0  # accumulated positive work of gravity and external forces, J
 
@@ -601,6 +685,8 @@ class XPBDCloth:
             e_scale,
             edge_damping,
             self.n_stretch,
+            self.chain_ptr,
+            self.chain_vert,
             hinges,
             hinge_rest,
             h_alpha,
@@ -619,6 +705,7 @@ class XPBDCloth:
             v_new,
             self._scratch_x,
             self._scratch_lambda,
+            self._scratch_chain,
         )
         if not finite:
             raise SimulationDiverged(self.steps, "cloth positions or velocities are not finite")
