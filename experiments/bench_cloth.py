@@ -7,7 +7,7 @@ body collisions: a 40 x 25 flag >= 300 frames/s, a 64 x 64 cloth >= 60, a 100 x 
 (numba compiles, cached) and then ``--frames`` timed frames; the figures are the median
 and the best of the loop's own ``step_seconds`` phases (wind, aero, cloth, total).
 
-    PYTHONPATH=$PWD python experiments/bench_cloth.py [--frames 120] [--substeps 16]
+    PYTHONPATH=$PWD python experiments/bench_cloth.py [--frames 120] [--substeps 16] [key=value ...]
 
 writes ``experiments/results/bench_cloth.csv`` (one row per case).
 
@@ -106,8 +106,10 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=30)
     parser.add_argument("--substeps", type=int, default=None)
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("overrides", nargs="*", help="further config overrides, key=value")
     args = parser.parse_args()
     extra = [] if args.substeps is None else [f"cloth.substeps={args.substeps}"]
+    extra += args.overrides
     rows = []
     for name, res, target in CASES:
         row = {"case": name, "nu": res[0], "nv": res[1], "target_fps": target}
