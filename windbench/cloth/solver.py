@@ -26,8 +26,9 @@ Per frame of length dt, with ``h = dt / cloth.substeps``, each substep does
 
 1. ``v += h (g + f_ext / m)``; ``p = x + h v`` (pinned vertices: inverse mass 0, p = x);
 2. Gauss-Seidel passes over the constraints (stiffness mapping in
-   :mod:`windbench.cloth.topology`): ``cloth.edge_iterations`` passes over the stretch edges
-   (the first also over the shear edges), one over the dihedral bending hinges, each
+   :mod:`windbench.cloth.topology`): ``cloth.edge_iterations`` passes over the stretch edges,
+   thread by thread (*Threads* below; the first pass then also over the shear edges, one by
+   one), one over the dihedral bending hinges, each
    ``dlambda = (-C - alpha~ lambda) / (sum_k w_k |grad_k C|^2 + alpha~)``,
    ``p_k += w_k dlambda grad_k C`` with ``alpha~ = 1 / (k h^2)``; then the long-range
    attachments (tethers, Kim et al. 2012): a vertex may not be farther from its nearest pin
@@ -51,6 +52,32 @@ above the discrete beam at 512 substeps (a slow test), 8% at 128, 23% at 64. Low
 modes are damped mainly by the air (aero.py); the per-constraint damping of step 5 is one
 Gauss-Seidel pass and reaches mostly the short wavelengths.
 
+Threads. The stretch edges are stiff (alpha~ a hundredth of the vertex weights w), and
+edge-by-edge Gauss-Seidel carries a load about one edge per pass: at the default 8
+substeps x 4 passes a 40 x 25 flag hanging from its pole in still air had its top edge 11%
+long next to the pole, a 64 x 64 one 23%, flags in 6 m/s wind 5 / 7 / 11% (median of the
+largest edge strain at 40x25 / 64x64 / 100x60); 16 substeps fixed 40 x 25 at 1.7x the cost,
+over-relaxation and alternating sweeps did not fix the finer meshes. So the stretch edges
+are decomposed into threads (:func:`~windbench.cloth.topology.thread_chains`: simple paths
+of straightest continuation, the warp and weft threads of a flag, the hoops and lines of
+the shirt's tubes) and each pass solves every thread's linearised XPBD system exactly
+(:func:`solve_chains`, line Gauss-Seidel: a tridiagonal system, Thomas algorithm, O(n);
+cf. Deul et al. 2018, direct solver for rods): one pass carries the pull of a pin along the
+whole thread. Threads of one direction share no vertex, so a pass is block Gauss-Seidel
+with two blocks (warp, weft) instead of one block per edge. ``cloth.threads=false`` makes
+every edge a chain of its own (the edge-by-edge sweep, for comparison). Measured
+(``experiments/bench_cloth.py --stretch``, 4 s runs, default settings):
+flags in 6 m/s wind 0.9 / 1.6 / 2.0% median largest edge strain (was 5.0 / 7.2 / 11%); the
+hanging 40 x 25 flag 1.2% (was 11-12%); at the same cost per frame (the thread solve costs
+about what the edge sweep did, a sqrt and two divisions per edge). Not fixed: the hanging
+64 x 64 and 100 x 60 flags (14% and 27% at the end of 4 s; 23% and 25% before). Their
+flags collapse into full 90 degree shear along the pole (each weft thread hangs straight
+down from its pin), where the diagonal shear springs, compressed or stretched by 40-70%,
+push against the warp edges of the top row; with ``shear_stiffness=0`` the same flags hang
+at 2.7% and 3.2%, and the stiff solve itself converges slowly there (64 x 64: 6.4% at 32
+substeps x 16 passes, 4.7% at 64 x 16): the remaining strain is the diagonal-spring shear
+model in that degenerate state, not the propagation along threads.
+
 The external forces (the aerodynamic forces of ``aero.py``, paper §3) are held constant
 over the substeps of one frame: the wind is sampled once per frame. This explicit coupling
 is stable while ``dt rho_air C_D |v_rel| / (mass per area) < 2``: 0.94 for the default flag
@@ -65,8 +92,8 @@ flag (8 substeps, 4 edge passes), the hinge pass is about half the frame (one fa
 hinge), the edge passes a third. Three orderings, fixed with the model, cut it without
 changing what is computed: contacts are tested only for vertices inside a body's bounding
 box grown by the margin (:func:`~windbench.cloth.collision.near_a_body`: the same contacts,
-bit for bit; the pole's cylinder cost a quarter of the frame before); edges and hinges go
-by colour within each band of equal distance from the pins
+bit for bit; the pole's cylinder cost a quarter of the frame before); the threads go by
+their distance from the pins, shear edges and hinges by colour within each band of equal distance from the pins
 (:func:`~windbench.cloth.topology.colour_order`): consecutive constraints then share no
 vertex and the processor overlaps them instead of waiting for each result, while the
 sweep still runs outwards from the pins band by band (the stretch of hanging and flying
@@ -600,7 +627,7 @@ class XPBDCloth:
         )
         # Gauss-Seidel order: outwards from the pins, so that one pass carries a pin's hold
         # down the cloth (measured: less stretch than mesh order at the same cost); stretch
-        # edges first (the further edge passes cover them alone). Within a band of equal
+        # edges first (then put in thread order below). Within a band of equal
         # distance from the pins (one edge length wide) edges and hinges go by colour
         # (colour_order): a third faster edge sweeps, the same stretch (measured: hanging
         # 16x16 cloth 1.41% both, 32x32 6.35% vs 6.40%; flags in wind within +-4%).
