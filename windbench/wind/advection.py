@@ -17,23 +17,23 @@ keeps it stable); second order in space and time where the field is smooth.
 
 from __future__ import annotations
 
+import math
+
 from numba import njit, prange
 
 
 @njit(cache=True, inline="always")
-def _locate(p, origin, h, npad):
-    """Lower lattice index and weight of coordinate p on a padded axis of npad samples."""
-    f = min(max((p - origin) / h, 0.0), npad - 1.0)  # clamped onto the lattice
+def _locate(f, npad):
+    """Lower index and weight of lattice coordinate f on a padded axis of npad samples,
+    clamped onto the lattice."""
+    f = min(max(f, 0.0), npad - 1.0)
     i0 = min(int(f), npad - 2)
     return i0, f - i0
 
 
 @njit(cache=True, inline="always")
-def interp(q, ox, oy, oz, h, px, py, pz):
-    """q trilinearly interpolated at (px, py, pz); q[I,J,K] sits at origin + h (I, J, K)."""
-    i, fx = _locate(px, ox, h, q.shape[0])
-    j, fy = _locate(py, oy, h, q.shape[1])
-    k, fz = _locate(pz, oz, h, q.shape[2])
+def _trilinear(q, i, j, k, fx, fy, fz):
+    """q trilinearly interpolated in the lattice cell (i, j, k) at weights (fx, fy, fz)."""
     c00 = q[i, j, k] + fx * (q[i + 1, j, k] - q[i, j, k])
     c10 = q[i, j + 1, k] + fx * (q[i + 1, j + 1, k] - q[i, j + 1, k])
     c01 = q[i, j, k + 1] + fx * (q[i + 1, j, k + 1] - q[i, j, k + 1])
@@ -44,11 +44,20 @@ def interp(q, ox, oy, oz, h, px, py, pz):
 
 
 @njit(cache=True, inline="always")
-def corner_bounds(q, ox, oy, oz, h, px, py, pz):
-    """(min, max) of the eight lattice values around (px, py, pz)."""
-    i, _ = _locate(px, ox, h, q.shape[0])
-    j, _ = _locate(py, oy, h, q.shape[1])
-    k, _ = _locate(pz, oz, h, q.shape[2])
+def interp(q, fx, fy, fz):
+    """q trilinearly interpolated at lattice coordinates (fx, fy, fz) of its padded array."""
+    i, wx = _locate(fx, q.shape[0])
+    j, wy = _locate(fy, q.shape[1])
+    k, wz = _locate(fz, q.shape[2])
+    return _trilinear(q, i, j, k, wx, wy, wz)
+
+
+@njit(cache=True, inline="always")
+def _bounds(q, fx, fy, fz):
+    """(min, max) of the eight lattice values around lattice coordinates (fx, fy, fz)."""
+    i, _ = _locate(fx, q.shape[0])
+    j, _ = _locate(fy, q.shape[1])
+    k, _ = _locate(fz, q.shape[2])
     lo = q[i, j, k]
     hi = lo
     for di in range(2):
@@ -61,20 +70,34 @@ def corner_bounds(q, ox, oy, oz, h, px, py, pz):
 
 
 @njit(cache=True, inline="always")
-def _keep_inside(p, lo, length, periodic):
-    """Wrap p into [lo, lo + length) on a periodic axis, else clamp it into [lo, lo + length]."""
+def _keep_inside(p, n, periodic):
+    """Wrap cell coordinate p into [0, n) on a periodic axis of n cells, else clamp it into
+    [0, n]; points already inside (nearly all) take one comparison."""
+    if 0.0 <= p <= n:
+        return p
     if periodic:
-        return lo + (p - lo) % length
-    return min(max(p, lo), lo + length)
+        return p - n * math.floor(p / n)
+    return min(max(p, 0.0), n)
 
 
 @njit(cache=True, inline="always")
-def velocity_at(u, v, w, origins, h, px, py, pz):
-    """The staggered velocity (u, v, w) interpolated at a world point."""
+def velocity_at(u, v, w, x, y, z):
+    """The staggered velocity (u, v, w) at cell coordinates (x, y, z).
+
+    Component a's padded lattice has its element 0 at cell coordinate -1 along a (a face
+    beyond the ghost) and -1/2 across a (a ghost cell centre), so each axis needs only two
+    locations, "face" (x + 1) and "centre" (x + 1/2), shared by the three components.
+    """
+    iF, fF = _locate(x + 1.0, u.shape[0])
+    iC, fC = _locate(x + 0.5, v.shape[0])
+    jF, gF = _locate(y + 1.0, v.shape[1])
+    jC, gC = _locate(y + 0.5, u.shape[1])
+    kF, hF = _locate(z + 1.0, w.shape[2])
+    kC, hC = _locate(z + 0.5, u.shape[2])
     return (
-        interp(u, origins[0, 0], origins[0, 1], origins[0, 2], h, px, py, pz),
-        interp(v, origins[1, 0], origins[1, 1], origins[1, 2], h, px, py, pz),
-        interp(w, origins[2, 0], origins[2, 1], origins[2, 2], h, px, py, pz),
+        _trilinear(u, iF, jC, kC, fF, gC, hC),
+        _trilinear(v, iC, jF, kC, fC, gF, hC),
+        _trilinear(w, iC, jC, kF, fC, gC, hF),
     )
 
 
@@ -93,34 +116,40 @@ def at_face(q, b, a, I, J, K):
 
 
 @njit(cache=True, parallel=True)
-def advect(q, a, u, v, w, origins, lower, extent, periodic, h, dt, out, qmin, qmax, bounds):
+def advect(q, a, u, v, w, cells, periodic, dt_h, out, qmin, qmax, bounds):
     """out = q(x_back) at every interior face of component a (RK2 backtrace over dt).
 
-    ``bounds``: also store the min/max of the eight values interpolated from in qmin/qmax
-    (for the MacCormack limiter). ``dt`` may be negative (the MacCormack back step).
+    Positions are in cell coordinates (world = lower + h x) and velocities in cells per
+    step (``dt_h`` = dt / h), so no division is done per face. ``cells``: the grid's cells
+    per axis. ``bounds``: also store the min/max of the eight values interpolated from in
+    qmin/qmax (for the MacCormack limiter). ``dt_h`` may be negative (the MacCormack back
+    step).
     """
     P0, P1, P2 = q.shape
-    ox, oy, oz = origins[a, 0], origins[a, 1], origins[a, 2]
+    n0, n1, n2 = cells[0], cells[1], cells[2]
+    p0, p1, p2 = periodic[0], periodic[1], periodic[2]
+    # cell coordinate of padded element [0, 0, 0] of component a, and back
+    s0 = -1.0 if a == 0 else -0.5
+    s1 = -1.0 if a == 1 else -0.5
+    s2 = -1.0 if a == 2 else -0.5
+    half = 0.5 * dt_h
     for I in prange(1, P0 - 1):
-        px = ox + h * I
+        x = s0 + I
         for J in range(1, P1 - 1):
-            py = oy + h * J
+            y = s1 + J
             for K in range(1, P2 - 1):
-                pz = oz + h * K
+                z = s2 + K
                 # the velocity at the face itself: no interpolation needed
-                ux = at_face(u, 0, a, I, J, K)
-                uy = at_face(v, 1, a, I, J, K)
-                uz = at_face(w, 2, a, I, J, K)
-                mx = _keep_inside(px - 0.5 * dt * ux, lower[0], extent[0], periodic[0])
-                my = _keep_inside(py - 0.5 * dt * uy, lower[1], extent[1], periodic[1])
-                mz = _keep_inside(pz - 0.5 * dt * uz, lower[2], extent[2], periodic[2])
-                ux, uy, uz = velocity_at(u, v, w, origins, h, mx, my, mz)
-                bx = _keep_inside(px - dt * ux, lower[0], extent[0], periodic[0])
-                by = _keep_inside(py - dt * uy, lower[1], extent[1], periodic[1])
-                bz = _keep_inside(pz - dt * uz, lower[2], extent[2], periodic[2])
-                out[I, J, K] = interp(q, ox, oy, oz, h, bx, by, bz)
+                mx = _keep_inside(x - half * at_face(u, 0, a, I, J, K), n0, p0)
+                my = _keep_inside(y - half * at_face(v, 1, a, I, J, K), n1, p1)
+                mz = _keep_inside(z - half * at_face(w, 2, a, I, J, K), n2, p2)
+                um, vm, wm = velocity_at(u, v, w, mx, my, mz)
+                bx = _keep_inside(x - dt_h * um, n0, p0) - s0
+                by = _keep_inside(y - dt_h * vm, n1, p1) - s1
+                bz = _keep_inside(z - dt_h * wm, n2, p2) - s2
+                out[I, J, K] = interp(q, bx, by, bz)
                 if bounds:
-                    lo, hi = corner_bounds(q, ox, oy, oz, h, bx, by, bz)
+                    lo, hi = _bounds(q, bx, by, bz)
                     qmin[I, J, K] = lo
                     qmax[I, J, K] = hi
 

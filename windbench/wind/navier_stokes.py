@@ -298,7 +298,7 @@ class NavierStokesWind(WindField):
         shape = grid.shape
         self.h = float(grid.h)
         self.lower = np.asarray(grid.lower, dtype=float)
-        self.extent = grid.upper - self.lower
+        self.cells = np.asarray(grid.shape, dtype=np.int64)
         self.solid = self._solid.astype(np.uint8)
         self.kinds = self._face_kinds(scene)
         self.periodic = np.array([self.kinds[2 * a] == PERIODIC for a in range(3)])
@@ -429,54 +429,26 @@ class NavierStokesWind(WindField):
         for a in range(3):
             boundaries.fill_boundary(arrays[a], a, self.kinds, self.planes[a], True)
 
-    def _advect(self, dt):
+    def _carry(self, src, a, dt_h, out, qmin=None, qmax=None):
+        """out = src(x_back) for component a; with qmin/qmax also the limiter's bounds."""
+        bounds = qmin is not None
         u, v, w = self.q
-        args = (self.origins, self.lower, self.extent, self.periodic, self.h)
+        advection.advect(
+            src, a, u, v, w, self.cells, self.periodic, dt_h, out,
+            qmin if bounds else out, qmax if bounds else out, bounds,
+        )  # fmt: skip
+
+    def _advect(self, dt):
+        dt_h = dt / self.h
         if self.advection == "semi_lagrangian":
             for a in range(3):
-                advection.advect(
-                    self.q[a],
-                    a,
-                    u,
-                    v,
-                    w,
-                    *args,
-                    dt,
-                    self.work[a],
-                    self.work[a],
-                    self.work[a],
-                    False,
-                )
+                self._carry(self.q[a], a, dt_h, self.work[a])
         else:
             for a in range(3):
-                advection.advect(
-                    self.q[a],
-                    a,
-                    u,
-                    v,
-                    w,
-                    *args,
-                    dt,
-                    self.work2[a],
-                    self.qmin[a],
-                    self.qmax[a],
-                    True,
-                )
+                self._carry(self.q[a], a, dt_h, self.work2[a], self.qmin[a], self.qmax[a])
             self._fill(self.work2)
             for a in range(3):
-                advection.advect(
-                    self.work2[a],
-                    a,
-                    u,
-                    v,
-                    w,
-                    *args,
-                    -dt,
-                    self.work[a],
-                    self.work[a],
-                    self.work[a],
-                    False,
-                )
+                self._carry(self.work2[a], a, -dt_h, self.work[a])
                 advection.maccormack_correct(
                     self.q[a], self.work2[a], self.work[a], self.qmin[a], self.qmax[a], self.work[a]
                 )

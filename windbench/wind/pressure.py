@@ -62,41 +62,36 @@ def _interior_sum(x, wx, wy, wz, i, j, k):
 
 
 @njit(cache=True, inline="always")
-def _nb_sum(x, wx, wy, wz, periodic, i, j, k):
-    """(sum_f w_f x_nb, diag = sum_f w_f) around cell (i, j, k); ghost x = 0 outside.
+def _axis_neighbours(i, n, periodic):
+    """Lower and upper neighbour of index i on an axis of n cells, each with a factor 1 when
+    it exists (inside, or wrapped on a periodic axis) and 0 when it is the ghost x = 0."""
+    lower_in, upper_in = i > 0, i < n - 1
+    im = i - 1 if lower_in else n - 1
+    ip = i + 1 if upper_in else 0
+    return im, 1.0 if lower_in or periodic else 0.0, ip, 1.0 if upper_in or periodic else 0.0
 
-    The weights already carry the level's (h/H)^2 factor. Interior cells take a branch-free
-    path (a closed face has w = 0, so it drops out of both sums).
+
+@njit(cache=True, inline="always")
+def _nb_sum(x, wx, wy, wz, periodic, i, j, k):
+    """(sum_f w_f x_nb, diag = sum_f w_f) around any cell (i, j, k); ghost x = 0 outside.
+
+    The weights already carry the level's (h/H)^2 factor. Branch-free (selects only): a
+    branchy version cost about 45 ns per cell, seven times this one, which made the few
+    per cent of boundary cells the larger part of a sweep.
     """
     nx, ny, nz = x.shape
-    if 0 < i < nx - 1 and 0 < j < ny - 1 and 0 < k < nz - 1:
-        return _interior_sum(x, wx, wy, wz, i, j, k)
+    im, fim, ip, fip = _axis_neighbours(i, nx, periodic[0])
+    jm, fjm, jp, fjp = _axis_neighbours(j, ny, periodic[1])
+    km, fkm, kp, fkp = _axis_neighbours(k, nz, periodic[2])
     w0, w1, w2, w3, w4, w5 = _cell_face_weights(wx, wy, wz, i, j, k)
-    s = 0.0
-    if i > 0:
-        s += w0 * x[i - 1, j, k]
-    elif periodic[0]:
-        s += w0 * x[nx - 1, j, k]
-    if i < nx - 1:
-        s += w1 * x[i + 1, j, k]
-    elif periodic[0]:
-        s += w1 * x[0, j, k]
-    if j > 0:
-        s += w2 * x[i, j - 1, k]
-    elif periodic[1]:
-        s += w2 * x[i, ny - 1, k]
-    if j < ny - 1:
-        s += w3 * x[i, j + 1, k]
-    elif periodic[1]:
-        s += w3 * x[i, 0, k]
-    if k > 0:
-        s += w4 * x[i, j, k - 1]
-    elif periodic[2]:
-        s += w4 * x[i, j, nz - 1]
-    if k < nz - 1:
-        s += w5 * x[i, j, k + 1]
-    elif periodic[2]:
-        s += w5 * x[i, j, 0]
+    s = (
+        w0 * fim * x[im, j, k]
+        + w1 * fip * x[ip, j, k]
+        + w2 * fjm * x[i, jm, k]
+        + w3 * fjp * x[i, jp, k]
+        + w4 * fkm * x[i, j, km]
+        + w5 * fkp * x[i, j, kp]
+    )
     return s, w0 + w1 + w2 + w3 + w4 + w5
 
 
