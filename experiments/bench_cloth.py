@@ -7,9 +7,15 @@ body collisions: a 40 x 25 flag >= 300 frames/s, a 64 x 64 cloth >= 60, a 100 x 
 (numba compiles, cached) and then ``--frames`` timed frames; the figures are the median
 and the best of the loop's own ``step_seconds`` phases (wind, aero, cloth, total).
 
-    PYTHONPATH=$PWD python experiments/bench_cloth.py [--frames 120] [--substeps 16]
+    PYTHONPATH=$PWD python experiments/bench_cloth.py [--frames 120] [--substeps 16] [key=value ...]
 
-writes ``experiments/results/bench_cloth.csv`` (one row per case).
+writes ``experiments/results/bench_cloth.csv`` (one row per case). With ``--stretch`` it
+records instead how far the stiff membrane stretches at the three sizes (issue 5: under 5%):
+the flag hanging from its pole in still air (``scene.sources=[]``; the largest warp/weft
+edge strain at the end of 4 s and its maximum over the last 2 s) and in its 6 m/s wind
+(the median and the maximum of the largest edge strain over 0.5-4 s), into
+``experiments/results/stretch_cloth.csv``; e.g. ``--stretch cloth.threads=false`` gives
+the edge-by-edge sweep.
 
 The machine is shared: besides wall time (the loop's ``step_seconds``) each frame's CPU
 time of this process is recorded (``time.process_time``), which is what the frame costs
@@ -44,6 +50,34 @@ CASES = (
     ("flag_100x60", (100, 60), 30.0),
 )
 OUT = Path(__file__).resolve().parent / "results" / "bench_cloth.csv"
+STRETCH_OUT = OUT.with_name("stretch_cloth.csv")
+STRETCH_FRAMES = 240  # 4 s
+
+
+def stretch_case(resolution, still: bool, extra: list[str]) -> dict:
+    """Largest warp/weft edge strain per frame of a 4 s flag run (still air or wind)."""
+    nu, nv = resolution
+    cfg = compose_config(
+        [
+            "scene=flag",
+            "wind=global",
+            f"scene.cloths.0.resolution=[{nu},{nv}]",
+            f"sim.duration={STRETCH_FRAMES / 60.0}",
+            "sim.progress=false",
+            "grid.resolution=16",
+            *(["scene.sources=[]"] if still else []),
+            *extra,
+        ]
+    )
+    sim = Simulation(prepare(cfg))
+    strain = []
+    for n in range(STRETCH_FRAMES):
+        sim.step(n)
+        strain.append(sim.cloth_solver.max_stretch(sim.state.positions))
+    s = np.asarray(strain)
+    if still:
+        return {"air": "still", "final": s[-1], "max_last_2s": s[120:].max()}
+    return {"air": "wind 6 m/s", "median_0.5_4s": np.median(s[30:]), "max_0.5_4s": s[30:].max()}
 
 
 def bench_case(resolution, frames: int, warmup: int, extra: list[str]) -> dict:
@@ -106,8 +140,13 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=30)
     parser.add_argument("--substeps", type=int, default=None)
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--stretch", action="store_true", help="record stretch, not speed")
+    parser.add_argument("overrides", nargs="*", help="further config overrides, key=value")
     args = parser.parse_args()
     extra = [] if args.substeps is None else [f"cloth.substeps={args.substeps}"]
+    extra += args.overrides
+    if args.stretch:
+        return write_stretch(extra, args.out if args.out != OUT else STRETCH_OUT)
     rows = []
     for name, res, target in CASES:
         row = {"case": name, "nu": res[0], "nv": res[1], "target_fps": target}
@@ -135,6 +174,28 @@ def main() -> None:
                 {k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()}
             )
     print(f"wrote {args.out}")
+
+
+def write_stretch(extra: list[str], out: Path) -> None:
+    rows = []
+    for name, res, _ in CASES:
+        for still in (True, False):
+            row = {"case": name, "overrides": " ".join(extra)}
+            row.update(stretch_case(res, still, extra))
+            rows.append(row)
+            print(
+                ", ".join(
+                    f"{k} {v:.4f}" if isinstance(v, float) else str(v) for k, v in row.items()
+                )
+            )
+    keys = list(dict.fromkeys(k for row in rows for k in row))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=keys)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: f"{v:.6g}" if isinstance(v, float) else v for k, v in row.items()})
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ from windbench.cloth import make_cloth_solver
 from windbench.cloth.collision import max_penetration
 from windbench.cloth.mesh import flag_mesh
 from windbench.cloth.model import ClothModel
-from windbench.cloth.solver import XPBDCloth, fast_atan2, project_hinge
+from windbench.cloth.solver import XPBDCloth, fast_atan2, project_hinge, solve_chains
 from windbench.cloth.topology import dihedral_angles
 from windbench.config import ClothConfig
 from windbench.errors import ConfigError, SimulationDiverged
@@ -81,6 +81,60 @@ def test_pinned_at_two_corners_hangs_with_little_stretch_and_comes_to_rest():
     assert solver.max_stretch(state.positions) < 0.05  # nor any single warp/weft edge
     assert state.positions[:, 2].min() < -0.9  # it does hang (lowest point ~1 m down)
     assert energy.max() > 0.05 and energy[-1] < 1e-3 * energy.max()  # and it comes to rest
+
+
+def _vertical_chain(rest, inv_mass, alpha):
+    """Arguments of solve_chains for one chain down the z axis: vertex k joins edge k-1, k."""
+    m = len(rest)
+    scale = 1.0 / (inv_mass[:-1] + inv_mass[1:] + alpha)
+    ptr, verts = np.array([0, m]), np.arange(m + 1)
+    return ptr, verts, rest, alpha, scale, np.zeros(m), np.empty((m, 5))
+
+
+def test_one_chain_solve_makes_a_straight_inextensible_chain_exact():
+    rng = np.random.default_rng(1)
+    m = 12
+    rest = rng.uniform(0.05, 0.1, m)
+    for inv_mass in (np.r_[0.0, rng.uniform(0.5, 2.0, m)], rng.uniform(0.5, 2.0, m + 1)):
+        # collinear start: every edge 30% too long or too short, the first vertex a pin or not
+        seg = rest * rng.uniform(0.7, 1.3, m)
+        p = np.zeros((m + 1, 3))
+        p[1:, 2] = -np.cumsum(seg)
+        x = p.copy()
+        solve_chains(p, inv_mass, *_vertical_chain(rest, inv_mass, np.zeros(m)))
+        # along a line the constraints are linear: one direct solve satisfies them all
+        np.testing.assert_allclose(-np.diff(p[:, 2]), rest, rtol=1e-12)
+        np.testing.assert_array_equal(p[:, :2], 0.0)
+        if inv_mass[0] == 0.0:  # hanging from the pin: each vertex at the rest path length
+            np.testing.assert_allclose(p[1:, 2], -np.cumsum(rest), rtol=1e-12)
+        else:  # free: the mass-weighted centre does not move (momentum conserved)
+            mass = 1.0 / inv_mass
+            assert mass @ p[:, 2] == pytest.approx(mass @ x[:, 2], rel=1e-12)
+
+
+def test_chain_of_springs_hangs_at_the_static_elongation():
+    """Implicit Euler by substeps (predict, one exact chain solve, v = dx/h) comes to rest
+    where each spring carries the weight below it: elongation_k = g sum_(i>k) m_i / k_k."""
+    rng = np.random.default_rng(2)
+    m, g, h = 10, 9.81, 0.01
+    rest = rng.uniform(0.05, 0.1, m)
+    k = rng.uniform(200.0, 2000.0, m)  # N/m
+    mass = rng.uniform(0.005, 0.02, m + 1)
+    inv_mass = np.r_[0.0, 1.0 / mass[1:]]  # vertex 0 pinned
+    args = _vertical_chain(rest, inv_mass, 1.0 / k / h**2)  # alpha~ = alpha / h^2
+    lam = args[5]
+    x = np.zeros((m + 1, 3))
+    x[1:, 2] = -np.cumsum(rest)
+    v = np.zeros_like(x)
+    for _ in range(1000):
+        v[1:, 2] -= h * g
+        p = x + h * v
+        lam[:] = 0.0
+        solve_chains(p, inv_mass, *args)
+        v, x = (p - x) / h, p
+    weight_below = g * np.cumsum(mass[::-1])[::-1][1:]
+    np.testing.assert_allclose(-np.diff(x[:, 2]), rest + weight_below / k, rtol=1e-9)
+    assert np.abs(v).max() < 1e-9
 
 
 def test_hinge_projection_follows_the_angle_gradient():
@@ -236,6 +290,7 @@ def test_same_input_gives_the_same_bits():
         ({"edge_iterations": 1.5}, "cloth.edge_iterations"),
         ({"collision_margin": -0.1}, "cloth.collision_margin"),
         ({"solver": "verlet"}, "cloth.solver"),
+        ({"threads": "yes"}, "cloth.threads"),
     ],
 )
 def test_bad_solver_settings_name_their_key(change, key):

@@ -16,6 +16,7 @@ from windbench.cloth.topology import (
     colour_order,
     dihedral_angles,
     tethers,
+    thread_chains,
     triangle_areas,
 )
 from windbench.config import ClothConfig
@@ -107,8 +108,32 @@ def test_tethers_of_a_flag_run_straight_to_the_pole():
     np.testing.assert_allclose(path[free], length[free])  # lattice rows are straight paths
 
 
-def test_shirt_tubes_are_closed_and_hang_from_their_top_rings():
-    spec = dict(
+def _chains(vertices, triangles, priority=None):
+    t = build_topology(vertices, triangles)
+    stretch = t.edges[~t.edge_shear]
+    priority = np.zeros(len(stretch)) if priority is None else priority
+    order, ptr, verts = thread_chains(vertices, stretch, priority)
+    paths = [verts[ptr[c] + c : ptr[c + 1] + c + 1] for c in range(len(ptr) - 1)]
+    for c, path in enumerate(paths):  # chain c's k-th edge joins its k-th and (k+1)-th vertex
+        np.testing.assert_array_equal(
+            np.sort(stretch[order[ptr[c] : ptr[c + 1]]], axis=1),
+            np.sort(np.stack([path[:-1], path[1:]], axis=1), axis=1),
+        )
+    assert sorted(order.tolist()) == list(range(len(stretch)))  # every edge in one chain
+    return stretch, paths
+
+
+def test_thread_chains_of_a_lattice_are_its_warp_and_weft_threads():
+    mesh = _flag(pin="pole")
+    _, paths = _chains(mesh.vertices, mesh.triangles)
+    ids = np.arange(NU * NV).reshape(NU, NV)
+    threads = {tuple(r) for r in ids} | {tuple(c) for c in ids.T}  # warp and weft
+    assert len(paths) == NU + NV
+    assert {tuple(p) if p[0] < p[-1] else tuple(p[::-1]) for p in paths} == threads
+
+
+def _shirt_spec():
+    return dict(
         collar=[0, 0, 1.5],
         radius=0.2,
         length=0.5,
@@ -118,7 +143,26 @@ def test_shirt_tubes_are_closed_and_hang_from_their_top_rings():
         sleeve_length=0.2,
         sleeve_angle=20.0,
     )
-    mesh = shirt_mesh(spec, "c")
+
+
+def test_thread_chains_of_the_shirt_are_straight_simple_paths():
+    mesh = shirt_mesh(_shirt_spec(), "c")
+    stretch, paths = _chains(mesh.vertices, mesh.triangles)
+    x = mesh.vertices
+    for path in paths:
+        assert len(np.unique(path)) == len(path)  # a simple path: no vertex twice
+        d = np.diff(x[path], axis=0)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        assert np.all(np.einsum("ij,ij->i", d[:-1], d[1:]) > 0.5)  # turns under 60 degrees
+    # torso: 24 lines of 10 edges along, 11 hoops = a path of 23 edges + a closing edge;
+    # each sleeve: 10 lines of 4 edges, 5 hoops of 9 + 1
+    lengths = sorted(len(p) - 1 for p in paths)
+    expected = [1] * (11 + 2 * 5) + [4] * 20 + [9] * 10 + [10] * 24 + [23] * 11
+    assert lengths == expected
+
+
+def test_shirt_tubes_are_closed_and_hang_from_their_top_rings():
+    mesh = shirt_mesh(_shirt_spec(), "c")
     t = build_topology(mesh.vertices, mesh.triangles)
     # closed tubes: the lateral area is 2 pi r l (up to the polygon's chord factor)
     torso = 24 * 11

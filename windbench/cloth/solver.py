@@ -26,8 +26,9 @@ Per frame of length dt, with ``h = dt / cloth.substeps``, each substep does
 
 1. ``v += h (g + f_ext / m)``; ``p = x + h v`` (pinned vertices: inverse mass 0, p = x);
 2. Gauss-Seidel passes over the constraints (stiffness mapping in
-   :mod:`windbench.cloth.topology`): ``cloth.edge_iterations`` passes over the stretch edges
-   (the first also over the shear edges), one over the dihedral bending hinges, each
+   :mod:`windbench.cloth.topology`): ``cloth.edge_iterations`` passes over the stretch edges,
+   thread by thread (*Threads* below; the first pass then also over the shear edges, one by
+   one), one over the dihedral bending hinges, each
    ``dlambda = (-C - alpha~ lambda) / (sum_k w_k |grad_k C|^2 + alpha~)``,
    ``p_k += w_k dlambda grad_k C`` with ``alpha~ = 1 / (k h^2)``; then the long-range
    attachments (tethers, Kim et al. 2012): a vertex may not be farther from its nearest pin
@@ -51,6 +52,32 @@ above the discrete beam at 512 substeps (a slow test), 8% at 128, 23% at 64. Low
 modes are damped mainly by the air (aero.py); the per-constraint damping of step 5 is one
 Gauss-Seidel pass and reaches mostly the short wavelengths.
 
+Threads. The stretch edges are stiff (alpha~ a hundredth of the vertex weights w), and
+edge-by-edge Gauss-Seidel carries a load about one edge per pass: at the default 8
+substeps x 4 passes a 40 x 25 flag hanging from its pole in still air had its top edge 11%
+long next to the pole, a 64 x 64 one 23%, flags in 6 m/s wind 5 / 7 / 11% (median of the
+largest edge strain at 40x25 / 64x64 / 100x60); 16 substeps fixed 40 x 25 at 1.7x the cost,
+over-relaxation and alternating sweeps did not fix the finer meshes. So the stretch edges
+are decomposed into threads (:func:`~windbench.cloth.topology.thread_chains`: simple paths
+of straightest continuation, the warp and weft threads of a flag, the hoops and lines of
+the shirt's tubes) and each pass solves every thread's linearised XPBD system exactly
+(:func:`solve_chains`, line Gauss-Seidel: a tridiagonal system, Thomas algorithm, O(n);
+cf. Deul et al. 2018, direct solver for rods): one pass carries the pull of a pin along the
+whole thread. Threads of one direction share no vertex, so a pass is block Gauss-Seidel
+with two blocks (warp, weft) instead of one block per edge. ``cloth.threads=false`` makes
+every edge a chain of its own (the edge-by-edge sweep, for comparison). Measured
+(``experiments/bench_cloth.py --stretch``, 4 s runs, default settings):
+flags in 6 m/s wind 0.9 / 1.6 / 2.0% median largest edge strain (was 5.0 / 7.2 / 11%); the
+hanging 40 x 25 flag 1.2% (was 11-12%); at the same cost per frame (the thread solve costs
+about what the edge sweep did, a sqrt and two divisions per edge). Not fixed: the hanging
+64 x 64 and 100 x 60 flags (14% and 27% at the end of 4 s; 23% and 25% before). Their
+flags collapse into full 90 degree shear along the pole (each weft thread hangs straight
+down from its pin), where the diagonal shear springs, compressed or stretched by 40-70%,
+push against the warp edges of the top row; with ``shear_stiffness=0`` the same flags hang
+at 2.7% and 3.2%, and the stiff solve itself converges slowly there (64 x 64: 6.4% at 32
+substeps x 16 passes, 4.7% at 64 x 16): the remaining strain is the diagonal-spring shear
+model in that degenerate state, not the propagation along threads.
+
 The external forces (the aerodynamic forces of ``aero.py``, paper §3) are held constant
 over the substeps of one frame: the wind is sampled once per frame. This explicit coupling
 is stable while ``dt rho_air C_D |v_rel| / (mass per area) < 2``: 0.94 for the default flag
@@ -65,8 +92,8 @@ flag (8 substeps, 4 edge passes), the hinge pass is about half the frame (one fa
 hinge), the edge passes a third. Three orderings, fixed with the model, cut it without
 changing what is computed: contacts are tested only for vertices inside a body's bounding
 box grown by the margin (:func:`~windbench.cloth.collision.near_a_body`: the same contacts,
-bit for bit; the pole's cylinder cost a quarter of the frame before); edges and hinges go
-by colour within each band of equal distance from the pins
+bit for bit; the pole's cylinder cost a quarter of the frame before); the threads go by
+their distance from the pins, shear edges and hinges by colour within each band of equal distance from the pins
 (:func:`~windbench.cloth.topology.colour_order`): consecutive constraints then share no
 vertex and the processor overlaps them instead of waiting for each result, while the
 sweep still runs outwards from the pins band by band (the stretch of hanging and flying
@@ -89,7 +116,7 @@ from numba import njit
 
 from windbench.cloth.collision import body_boxes, max_penetration, near_a_body, project_vertex
 from windbench.cloth.model import ClothModel, ClothState
-from windbench.cloth.topology import build_topology, colour_order, tethers
+from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import body_table
 
@@ -235,6 +262,58 @@ def project_hinge(p, inv_mass, i0, i1, i2, i3, rest, alpha):
     p[i3, 2] += f3 * nbz
 
 
+@njit(cache=True, inline="always")
+def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, work):
+    """One direct XPBD solve of each chain of distance constraints, in place.
+
+    Chain c (``chain_ptr``, ``chain_vert`` of :func:`~windbench.cloth.topology.thread_chains`)
+    is the path v_0 .. v_m of its edges e_k = (v_k, v_k+1), C_k = |p_v(k+1) - p_v(k)| - L_k,
+    grad C_k = +-n_k (n_k the unit edge direction). The linearised XPBD system of the chain,
+    ``(J W J^T + alpha~) dlambda = -C - alpha~ lambda``, is tridiagonal: diagonal
+    ``w_k + w_k+1 + alpha~_k``, off-diagonal ``-w_v(k+1) n_k . n_k+1`` between consecutive
+    edges; the Thomas algorithm solves it exactly in O(m) (no pivoting: the matrix is
+    diagonally dominant), then ``p_v += w_v sum_k dlambda_k grad_v C_k``. An edge with
+    ``scale`` 0 (two pins, zero stiffness) or zero length is an identity row (dlambda 0).
+    A chain of one edge is the plain XPBD edge projection. ``work`` (E, 5): n, c', r'.
+    """
+    for c in range(chain_ptr.shape[0] - 1):
+        e0, e1 = chain_ptr[c], chain_ptr[c + 1]
+        inv_den = 0.0  # 1 / pivot of the previous row
+        for e in range(e0, e1):  # forward elimination
+            a, b = chain_vert[e + c], chain_vert[e + c + 1]
+            dx, dy, dz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+            ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if scale[e] == 0.0 or ln == 0.0:  # identity row
+                work[e, 0] = work[e, 1] = work[e, 2] = 0.0
+                diag, rhs = 1.0, 0.0
+            else:
+                inv_ln = 1.0 / ln
+                work[e, 0], work[e, 1], work[e, 2] = dx * inv_ln, dy * inv_ln, dz * inv_ln
+                diag = inv_mass[a] + inv_mass[b] + alpha[e]
+                rhs = rest[e] - ln - alpha[e] * lam[e]  # -C - alpha~ lambda
+            if e > e0:  # off-diagonal -w_a n_(k-1) . n_k with the previous edge
+                off = -inv_mass[a] * (
+                    work[e - 1, 0] * work[e, 0]
+                    + work[e - 1, 1] * work[e, 1]
+                    + work[e - 1, 2] * work[e, 2]
+                )
+                cp = off * inv_den  # c'_(k-1)
+                work[e - 1, 3] = cp
+                diag -= off * cp
+                rhs -= off * work[e - 1, 4]
+            inv_den = 1.0 / diag
+            work[e, 4] = rhs * inv_den  # r'_k
+        dl = 0.0
+        for e in range(e1 - 1, e0 - 1, -1):  # back substitution and the position update
+            dl = work[e, 4] if e == e1 - 1 else work[e, 4] - work[e, 3] * dl
+            lam[e] += dl
+            a, b = chain_vert[e + c], chain_vert[e + c + 1]
+            sa, sb = inv_mass[a] * dl, inv_mass[b] * dl
+            for k in range(3):
+                p[b, k] += sb * work[e, k]
+                p[a, k] -= sa * work[e, k]
+
+
 @njit(cache=True)
 def damp_velocities(x, v, inv_mass, edges, edge_c, hinges, hinge_c, dt):
     """Stiffness-proportional (Rayleigh) damping of the frame's velocities, in place.
@@ -300,6 +379,8 @@ def xpbd_frame(
     edge_scale,
     edge_damping,
     n_stretch,
+    chain_ptr,
+    chain_vert,
     hinges,
     hinge_rest,
     hinge_alpha,
@@ -318,6 +399,7 @@ def xpbd_frame(
     v_out,
     scratch_x,
     scratch_lambda,
+    scratch_chain,
 ):
     """One frame of ``substeps`` XPBD substeps (module docstring, steps 1-5), one call.
 
@@ -353,9 +435,22 @@ def xpbd_frame(
                     vv[i, k] = 0.0
                     p[i, k] = xp[i, k]
         lam[:] = 0.0
-        for it in range(edge_iterations):
-            # the first pass covers all edges, the further ones the stiff stretch edges only
-            for e in range(n_e if it == 0 else n_stretch):  # 2a. C = |p_i - p_j| - L
+        for it in range(edge_iterations):  # 2a. C = |p_i - p_j| - L
+            # the stretch edges thread by thread, each thread solved directly
+            solve_chains(
+                p,
+                inv_mass,
+                chain_ptr,
+                chain_vert,
+                edge_rest,
+                edge_alpha,
+                edge_scale,
+                lam,
+                scratch_chain,
+            )
+            if it > 0:
+                continue
+            for e in range(n_stretch, n_e):  # the first pass also the shear edges, one by one
                 if edge_scale[e] == 0.0:
                     continue
                 i, j = edges[e, 0], edges[e, 1]
@@ -489,6 +584,10 @@ class XPBDCloth:
                 "cloth.edge_iterations", f"must be an integer >= 1, got {iterations!r}"
             )
         self.edge_iterations = iterations
+        threads = _param(params, "threads", True)
+        if not isinstance(threads, bool):
+            raise ConfigError("cloth.threads", f"must be true or false, got {threads!r}")
+        self.threads = threads
         g = _number(_param(params, "gravity", 9.81), "cloth.gravity", False)
         self.gravity = np.array([0.0, 0.0, -g])  # z is up
         self.margin = _number(
@@ -528,7 +627,7 @@ class XPBDCloth:
         )
         # Gauss-Seidel order: outwards from the pins, so that one pass carries a pin's hold
         # down the cloth (measured: less stretch than mesh order at the same cost); stretch
-        # edges first (the further edge passes cover them alone). Within a band of equal
+        # edges first (then put in thread order below). Within a band of equal
         # distance from the pins (one edge length wide) edges and hinges go by colour
         # (colour_order): a third faster edge sweeps, the same stretch (measured: hanging
         # 16x16 cloth 1.41% both, 32x32 6.35% vs 6.40%; flags in wind within +-4%).
@@ -542,6 +641,17 @@ class XPBDCloth:
             topo.edges, near_e, topo.edge_shear * (band_e.max(initial=0) + 2) + band_e
         )
         self.n_stretch = int(np.count_nonzero(~topo.edge_shear))
+        stretch = self.edge_order[: self.n_stretch]
+        if self.threads:  # the stretch edges thread by thread (solve_chains), pins first
+            order, self.chain_ptr, self.chain_vert = thread_chains(
+                model.rest_positions, topo.edges[stretch], near_e[stretch]
+            )
+            self.edge_order = np.concatenate([stretch[order], self.edge_order[self.n_stretch :]])
+        else:  # every stretch edge a chain of its own: edge-by-edge Gauss-Seidel
+            self.chain_ptr = np.arange(self.n_stretch + 1, dtype=np.int64)
+            self.chain_vert = np.empty(2 * self.n_stretch, dtype=np.int64)
+            self.chain_vert[0::2] = topo.edges[stretch, 0]
+            self.chain_vert[1::2] = topo.edges[stretch, 1]
         self.hinge_order, _ = colour_order(topo.hinges, near_h, band_h)
         eo, ho = self.edge_order, self.hinge_order
         self._edge_arrays = tuple(
@@ -556,6 +666,7 @@ class XPBDCloth:
         self._constants_dt = None  # substep_constants cache
         self._scratch_x = np.empty((model.n_vertices, 3))  # work space of xpbd_frame
         self._scratch_lambda = np.empty(topo.edges.shape[0])
+        self._scratch_chain = np.empty((self.n_stretch, 5))
         self.steps = 0
         self.work_in = 0.0  # accumulated positive work of gravity and external forces, J
 
@@ -601,6 +712,8 @@ class XPBDCloth:
             e_scale,
             edge_damping,
             self.n_stretch,
+            self.chain_ptr,
+            self.chain_vert,
             hinges,
             hinge_rest,
             h_alpha,
@@ -619,6 +732,7 @@ class XPBDCloth:
             v_new,
             self._scratch_x,
             self._scratch_lambda,
+            self._scratch_chain,
         )
         if not finite:
             raise SimulationDiverged(self.steps, "cloth positions or velocities are not finite")

@@ -189,3 +189,75 @@ def colour_order(
             touched.append(i)
     order = by_priority[np.lexsort((colour[by_priority], group[by_priority]))]
     return order, colour[order]
+
+
+def thread_chains(
+    rest: np.ndarray, edges: np.ndarray, priority: np.ndarray, straight: float = 0.5
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Decompose ``edges`` (the stretch edges) into threads: simple paths, each edge in one.
+
+    Greedy straightest continuation: seeds are taken by increasing ``priority`` (then
+    index); a seed edge grows at both ends, each time by the unused edge at the end vertex
+    whose rest direction continues the last one most closely, as long as the cosine of the
+    turn exceeds ``straight`` (0.5: less than 60 degrees) and the new vertex is not yet on
+    the path (a closed ring, e.g. a tube's hoop, becomes a path and a one-edge chain). On a
+    rectangular lattice the chains are the warp and weft threads.
+    Returns (order ``(E,)``: the edges chain by chain, ptr ``(C + 1,)``: chain c is
+    ``order[ptr[c]:ptr[c + 1]]``, vertices ``(E + C,)``: chain c's path is
+    ``vertices[ptr[c] + c : ptr[c + 1] + c + 1]``, its k-th edge joins the k-th and
+    (k+1)-th of them).
+    """
+    n_e = edges.shape[0]
+    d = rest[edges[:, 1]] - rest[edges[:, 0]]
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    incident: dict[int, list[int]] = {}
+    for e, (a, b) in enumerate(edges.tolist()):
+        incident.setdefault(a, []).append(e)
+        incident.setdefault(b, []).append(e)
+    ends = edges.tolist()
+    dirs = d.tolist()
+    used = [False] * n_e
+
+    def grow(v: int, t: list[float], on_path: set[int]) -> tuple[list[int], list[int]]:
+        path_e, path_v = [], []
+        while True:
+            best, best_cos, nxt = -1, straight, -1
+            for e in incident[v]:
+                if used[e]:
+                    continue
+                a, b = ends[e]
+                other, s = (b, 1.0) if a == v else (a, -1.0)
+                if other in on_path:
+                    continue
+                c = s * (dirs[e][0] * t[0] + dirs[e][1] * t[1] + dirs[e][2] * t[2])
+                if c > best_cos:
+                    best, best_cos, nxt = e, c, other
+            if best < 0:
+                return path_e, path_v
+            used[best] = True
+            s = 1.0 if ends[best][0] == v else -1.0
+            t = [s * x for x in dirs[best]]
+            path_e.append(best)
+            path_v.append(nxt)
+            on_path.add(nxt)
+            v = nxt
+
+    order: list[int] = []
+    vertices: list[int] = []
+    ptr = [0]
+    for seed in np.lexsort((np.arange(n_e), priority)).tolist():
+        if used[seed]:
+            continue
+        used[seed] = True
+        a, b = ends[seed]
+        on_path = {a, b}
+        fwd_e, fwd_v = grow(b, dirs[seed], on_path)
+        bwd_e, bwd_v = grow(a, [-x for x in dirs[seed]], on_path)
+        order += bwd_e[::-1] + [seed] + fwd_e
+        vertices += bwd_v[::-1] + [a, b] + fwd_v
+        ptr.append(len(order))
+    return (
+        np.asarray(order, dtype=np.int64),
+        np.asarray(ptr, dtype=np.int64),
+        np.asarray(vertices, dtype=np.int64),
+    )
