@@ -24,7 +24,7 @@ def _level(rng, periodic=(False, False, False)) -> _Level:
             lev.w[a][tuple(lo)] = 0.0
     lev.w[0][3:5, 2:5, 4:9] = 0.0  # a closed patch of x faces: rows off the fast path
     lev.w[2][6:8, 1:3, 2:6] = rng.random((2, 2, 4))  # fractional (coarse-level-like) weights
-    lev.mark_uniform_rows()
+    lev.classify_rows()
     return lev
 
 

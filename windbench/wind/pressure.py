@@ -49,172 +49,161 @@ def _cell_face_weights(wx, wy, wz, i, j, k):
 
 
 @njit(cache=True, inline="always")
-def _interior_sum(x, wx, wy, wz, i, j, k):
-    """(sum_f w_f x_nb, diag) at a cell none of whose neighbours is outside the grid."""
-    w0, w1, w2, w3, w4, w5 = _cell_face_weights(wx, wy, wz, i, j, k)
-    s = (
-        w0 * x[i - 1, j, k]
-        + w1 * x[i + 1, j, k]
-        + w2 * x[i, j - 1, k]
-        + w3 * x[i, j + 1, k]
-        + w4 * x[i, j, k - 1]
-        + w5 * x[i, j, k + 1]
-    )
-    return s, w0 + w1 + w2 + w3 + w4 + w5
-
-
-@njit(cache=True, inline="always")
 def _axis_neighbours(i, n, periodic):
     """Lower and upper neighbour of index i on an axis of n cells, each with a factor 1 when
-    it exists (inside, or wrapped on a periodic axis) and 0 when it is the ghost x = 0."""
+    it exists (inside, or wrapped on a periodic axis) and 0 when it is the ghost x = 0.
+    A ghost's index is i itself: the value read is multiplied by 0, and reading the far
+    side of the grid instead missed the cache on every cell of a boundary plane."""
+    i = np.int64(i)  # a prange index may be unsigned; keep every branch int64
     lower_in, upper_in = i > 0, i < n - 1
-    im = i - 1 if lower_in else n - 1
-    ip = i + 1 if upper_in else 0
+    im = i - 1 if lower_in else (n - 1 if periodic else i)
+    ip = i + 1 if upper_in else (0 if periodic else i)
     return im, 1.0 if lower_in or periodic else 0.0, ip, 1.0 if upper_in or periodic else 0.0
 
 
 @njit(cache=True, inline="always")
-def _nb_sum(x, wx, wy, wz, periodic, i, j, k):
-    """(sum_f w_f x_nb, diag = sum_f w_f) around any cell (i, j, k); ghost x = 0 outside.
+def _neighbour_rows(x, periodic, zero, i, j):
+    """Views of the rows beside row (i, j, :) along x and y (-x, +x, -y, +y): wrapped on a
+    periodic axis, the zero row (the ghost x = 0) beyond a non-periodic one. Found once per
+    row, they make every cell's stencil plain contiguous reads: computed indices or
+    factors per cell cost two to three times as much."""
+    nx, ny = x.shape[0], x.shape[1]
+    xm = x[i - 1, j] if i > 0 else (x[nx - 1, j] if periodic[0] else zero)
+    xp = x[i + 1, j] if i < nx - 1 else (x[0, j] if periodic[0] else zero)
+    ym = x[i, j - 1] if j > 0 else (x[i, ny - 1] if periodic[1] else zero)
+    yp = x[i, j + 1] if j < ny - 1 else (x[i, 0] if periodic[1] else zero)
+    return xm, xp, ym, yp
 
-    The weights already carry the level's (h/H)^2 factor. Branch-free (selects only): a
-    branchy version cost about 45 ns per cell, seven times this one, which made the few
-    per cent of boundary cells the larger part of a sweep.
-    """
-    nx, ny, nz = x.shape
-    im, fim, ip, fip = _axis_neighbours(i, nx, periodic[0])
-    jm, fjm, jp, fjp = _axis_neighbours(j, ny, periodic[1])
-    km, fkm, kp, fkp = _axis_neighbours(k, nz, periodic[2])
-    w0, w1, w2, w3, w4, w5 = _cell_face_weights(wx, wy, wz, i, j, k)
-    s = (
-        w0 * fim * x[im, j, k]
-        + w1 * fip * x[ip, j, k]
-        + w2 * fjm * x[i, jm, k]
-        + w3 * fjp * x[i, jp, k]
-        + w4 * fkm * x[i, j, km]
-        + w5 * fkp * x[i, j, kp]
-    )
+
+@njit(cache=True, inline="always")
+def _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wz, k):
+    """(sum_f w_f x_nb, diag = sum_f w_f) at inner cell 0 < k < nz - 1 of a row, from the
+    row views of x and of the face weights (which carry the level's (h/H)^2 factor; a
+    closed face has w = 0 and drops out of both sums)."""
+    w0, w1, w2, w3, w4, w5 = wxm[k], wxp[k], wym[k], wyp[k], wz[k], wz[k + 1]
+    s = w0 * xm[k] + w1 * xp[k] + w2 * ym[k] + w3 * yp[k] + w4 * xc[k - 1] + w5 * xc[k + 1]
     return s, w0 + w1 + w2 + w3 + w4 + w5
 
 
 @njit(cache=True, inline="always")
-def _row_is_interior(x, i, j):
-    """Row (i, j, :) lies off the x and y faces, so cells 1..nz-2 take the fast path."""
-    return 0 < i < x.shape[0] - 1 and 0 < j < x.shape[1] - 1
-
-
-@njit(cache=True, inline="always")
-def _uniform_sum(x, c0, c1, c2, i, j, k):
-    """sum_f w_f x_nb where every face of the cell is open (w_f = the level's c_axis)."""
-    return (
-        c0 * (x[i - 1, j, k] + x[i + 1, j, k])
-        + c1 * (x[i, j - 1, k] + x[i, j + 1, k])
-        + c2 * (x[i, j, k - 1] + x[i, j, k + 1])
-    )
-
-
-@njit(cache=True, inline="always")
-def _residual_cell(x, b, wx, wy, wz, periodic, i, j, k, out):
-    s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
-    out[i, j, k] = b[i, j, k] - (d * x[i, j, k] - s)
+def _end_sum(xc, xm, xp, ym, yp, ends, periodic, i, j, side):
+    """(sum_f w_f x_nb, diag) at the end cell k = 0 (side 0) or k = nz - 1 (side 1) of row
+    (i, j), its six face weights read from the compact table ``ends``: the weight arrays
+    are not touched by the constant-stencil rows, and reading them for one cell per row
+    missed the cache."""
+    nz = xc.shape[0]
+    k = 0 if side == 0 else nz - 1
+    km, fkm, kp, fkp = _axis_neighbours(k, nz, periodic[2])
+    w0, w1, w2 = ends[i, j, side, 0], ends[i, j, side, 1], ends[i, j, side, 2]
+    w3, w4, w5 = ends[i, j, side, 3], ends[i, j, side, 4], ends[i, j, side, 5]
+    s = w0 * xm[k] + w1 * xp[k] + w2 * ym[k] + w3 * yp[k] + w4 * fkm * xc[km] + w5 * fkp * xc[kp]
+    return s, w0 + w1 + w2 + w3 + w4 + w5
 
 
 @njit(cache=True)
-def _residual_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, out):
-    """out[i] = (b - A x)[i]: one plane of the residual."""
+def end_weights(wx, wy, wz, out):
+    """out[i, j, side] = the six face weights of cell k = 0 (side 0) and k = nz - 1 (side 1)
+    of row (i, j), in the order of :func:`_cell_face_weights`."""
+    nz = wx.shape[2]
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            for side in range(2):
+                w = _cell_face_weights(wx, wy, wz, i, j, 0 if side == 0 else nz - 1)
+                for f in range(6):
+                    out[i, j, side, f] = w[f]
+
+
+@njit(cache=True, inline="always")
+def _ends(nz):
+    """How many distinct end cells a row of nz cells has (one when nz == 1)."""
+    return 2 if nz > 1 else 1
+
+
+@njit(cache=True)
+def _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, residual):
+    """out[i] = (b - A x)[i] if ``residual``, else (A x)[i] (b unread)."""
+    sign = 1.0 if residual else -1.0
     c0, c1, c2 = coef[0], coef[1], coef[2]
     d_uniform = 2.0 * (c0 + c1 + c2)
-    ny, nz = x.shape[1], x.shape[2]
-    for j in range(ny):
-        if not _row_is_interior(x, i, j) or nz < 3:
-            for k in range(nz):
-                _residual_cell(x, b, wx, wy, wz, periodic, i, j, k, out)
-            continue
-        _residual_cell(x, b, wx, wy, wz, periodic, i, j, 0, out)
-        if uniform[i, j]:
-            for k in range(1, nz - 1):  # contiguous, no weight reads: vectorised
-                out[i, j, k] = b[i, j, k] - (
-                    d_uniform * x[i, j, k] - _uniform_sum(x, c0, c1, c2, i, j, k)
-                )
-        else:
+    nz = x.shape[2]
+    zero = np.zeros(nz)
+    for j in range(x.shape[1]):
+        xc, bc, oc = x[i, j], b[i, j], out[i, j]
+        xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
+        for side in range(_ends(nz)):
+            s, d = _end_sum(xc, xm, xp, ym, yp, ends, periodic, i, j, side)
+            k = 0 if side == 0 else nz - 1
+            oc[k] = (bc[k] if residual else 0.0) - sign * (d * xc[k] - s)
+        if uniform[i, j]:  # contiguous, no weight reads: vectorised
             for k in range(1, nz - 1):
-                s, d = _interior_sum(x, wx, wy, wz, i, j, k)
-                out[i, j, k] = b[i, j, k] - (d * x[i, j, k] - s)
-        _residual_cell(x, b, wx, wy, wz, periodic, i, j, nz - 1, out)
+                s = c0 * (xm[k] + xp[k]) + c1 * (ym[k] + yp[k]) + c2 * (xc[k - 1] + xc[k + 1])
+                oc[k] = (bc[k] if residual else 0.0) - sign * (d_uniform * xc[k] - s)
+        else:
+            wxm, wxp, wym, wyp, wzc = wx[i, j], wx[i + 1, j], wy[i, j], wy[i, j + 1], wz[i, j]
+            for k in range(1, nz - 1):
+                s, d = _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wzc, k)
+                oc[k] = (bc[k] if residual else 0.0) - sign * (d * xc[k] - s)
 
 
 @njit(cache=True, parallel=True)
-def residual(x, b, wx, wy, wz, periodic, uniform, coef, out):
+def residual(x, b, wx, wy, wz, periodic, uniform, ends, coef, out):
     """out = b - A x."""
     for i in prange(x.shape[0]):
-        _residual_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, out)
-
-
-@njit(cache=True, inline="always")
-def _operator_cell(x, wx, wy, wz, periodic, i, j, k, out):
-    s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
-    out[i, j, k] = d * x[i, j, k] - s
+        _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, True)
 
 
 @njit(cache=True, parallel=True)
-def apply_operator(x, wx, wy, wz, periodic, uniform, coef, out):
+def apply_operator(x, wx, wy, wz, periodic, uniform, ends, coef, out):
     """out = A x = sum_f c w_f (x_c - x_nb)."""
-    nx, ny, nz = x.shape
-    c0, c1, c2 = coef[0], coef[1], coef[2]
-    d_uniform = 2.0 * (c0 + c1 + c2)
-    for i in prange(nx):
-        for j in range(ny):
-            if not _row_is_interior(x, i, j) or nz < 3:
-                for k in range(nz):
-                    _operator_cell(x, wx, wy, wz, periodic, i, j, k, out)
-                continue
-            _operator_cell(x, wx, wy, wz, periodic, i, j, 0, out)
-            if uniform[i, j]:
-                for k in range(1, nz - 1):
-                    out[i, j, k] = d_uniform * x[i, j, k] - _uniform_sum(x, c0, c1, c2, i, j, k)
-            else:
-                for k in range(1, nz - 1):
-                    s, d = _interior_sum(x, wx, wy, wz, i, j, k)
-                    out[i, j, k] = d * x[i, j, k] - s
-            _operator_cell(x, wx, wy, wz, periodic, i, j, nz - 1, out)
-
-
-@njit(cache=True, inline="always")
-def _gs_cell(x, b, wx, wy, wz, periodic, i, j, k):
-    s, d = _nb_sum(x, wx, wy, wz, periodic, i, j, k)
-    if d > 0.0:
-        x[i, j, k] += OMEGA * ((b[i, j, k] + s) / d - x[i, j, k])
+    for i in prange(x.shape[0]):
+        _operator_plane(x, x, wx, wy, wz, periodic, uniform, ends, coef, i, out, False)
 
 
 @njit(cache=True)
-def _gs_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, colour):
+def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
+    """One colour of plane i. The stores are written out here: an inlined helper that
+    stores into an array made the loop three to four times slower (numba 0.6x)."""
     nz = x.shape[2]
     c0, c1, c2 = coef[0], coef[1], coef[2]
-    inv_d = 0.5 / (c0 + c1 + c2)
+    # x_c <- (1 - OMEGA) x_c + OMEGA (b_c + s) / diag, diag = 2 (c0 + c1 + c2)
+    keep, gain = 1.0 - OMEGA, OMEGA * 0.5 / (c0 + c1 + c2)
+    isotropic = c0 == c1 and c1 == c2
+    zero = np.zeros(nz)
     for j in range(x.shape[1]):
+        xc, bc = x[i, j], b[i, j]
+        xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
         first = (i + j + colour) % 2  # the first k of this colour in row (i, j)
-        if not _row_is_interior(x, i, j) or nz < 3:
-            for k in range(first, nz, 2):
-                _gs_cell(x, b, wx, wy, wz, periodic, i, j, k)
-            continue
-        if first == 0:
-            _gs_cell(x, b, wx, wy, wz, periodic, i, j, 0)
-        if uniform[i, j]:  # every face open: the constant stencil, no weight reads
-            for k in range(2 - first, nz - 1, 2):
-                x[i, j, k] += OMEGA * (
-                    (b[i, j, k] + _uniform_sum(x, c0, c1, c2, i, j, k)) * inv_d - x[i, j, k]
-                )
-        else:  # off every face: no bounds or periodic checks
-            for k in range(2 - first, nz - 1, 2):
-                s, d = _interior_sum(x, wx, wy, wz, i, j, k)
+        for side in range(_ends(nz)):
+            k = 0 if side == 0 else nz - 1
+            if k % 2 == first:
+                s, d = _end_sum(xc, xm, xp, ym, yp, ends, periodic, i, j, side)
+                if d > 0.0:  # (a cell without an open face is left alone)
+                    xc[k] += OMEGA * ((bc[k] + s) / d - xc[k])
+        # inner k = 2 - first, 4 - first, ... < nz - 1, counted: a stepped range with
+        # run-time bounds compiles to a loop almost twice as slow
+        count = (nz - 2 + first) // 2
+        if uniform[i, j] and isotropic:  # every face open, one coefficient: fewest flops
+            g = gain * c0
+            for m in range(count):
+                k = 2 - first + 2 * m
+                nb = xm[k] + xp[k] + ym[k] + yp[k] + xc[k - 1] + xc[k + 1]
+                xc[k] = keep * xc[k] + gain * bc[k] + g * nb
+        elif uniform[i, j]:  # every face open: the constant stencil, no weight reads
+            for m in range(count):
+                k = 2 - first + 2 * m
+                s = c0 * (xm[k] + xp[k]) + c1 * (ym[k] + yp[k]) + c2 * (xc[k - 1] + xc[k + 1])
+                xc[k] = keep * xc[k] + gain * (bc[k] + s)
+        else:
+            wxm, wxp, wym, wyp, wzc = wx[i, j], wx[i + 1, j], wy[i, j], wy[i, j + 1], wz[i, j]
+            for m in range(count):
+                k = 2 - first + 2 * m
+                s, d = _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wzc, k)
                 if d > 0.0:
-                    x[i, j, k] += OMEGA * ((b[i, j, k] + s) / d - x[i, j, k])
-        if (nz - 1 - first) % 2 == 0:
-            _gs_cell(x, b, wx, wy, wz, periodic, i, j, nz - 1)
+                    xc[k] += OMEGA * ((bc[k] + s) / d - xc[k])
 
 
 @njit(cache=True, parallel=True)
-def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, coef, colour):
+def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour):
     """One colour (cells with (i+j+k) % 2 == colour) of red-black SOR (``OMEGA``) on A x = b.
 
     On a periodic x axis with an odd number of planes the last plane neighbours the first
@@ -223,13 +212,13 @@ def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, coef, colour):
     nx = x.shape[0]
     last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
     for i in prange(last):
-        _gs_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, colour)
+        _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour)
     for i in range(last, nx):
-        _gs_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, colour)
+        _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour)
 
 
 @njit(cache=True)
-def gauss_seidel_serial(x, b, wx, wy, wz, periodic, uniform, coef, sweeps, reverse):
+def gauss_seidel_serial(x, b, wx, wy, wz, periodic, uniform, ends, coef, sweeps, reverse):
     """``sweeps`` red-black sweeps (black first if ``reverse``) on one thread, in one call:
     small levels, where a thread start-up or a Python call per half sweep costs more than
     the work. Cells of one colour do not neighbour each other: the bits of
@@ -238,14 +227,14 @@ def gauss_seidel_serial(x, b, wx, wy, wz, periodic, uniform, coef, sweeps, rever
         for half in range(2):
             colour = 1 - half if reverse else half
             for i in range(x.shape[0]):
-                _gs_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, colour)
+                _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour)
 
 
 @njit(cache=True)
-def residual_serial(x, b, wx, wy, wz, periodic, uniform, coef, out):
+def residual_serial(x, b, wx, wy, wz, periodic, uniform, ends, coef, out):
     """:func:`residual` on one thread (small levels)."""
     for i in range(x.shape[0]):
-        _residual_plane(x, b, wx, wy, wz, periodic, uniform, coef, i, out)
+        _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, True)
 
 
 @njit(cache=True)
@@ -407,17 +396,20 @@ class _Level:
         self.b = np.zeros(self.shape) if work else None
         self.r = np.zeros(self.shape)
         self.ratio = np.ones(3, dtype=np.int64)  # to the next coarser level
-        self.uniform = np.zeros((nx, ny), dtype=np.bool_)  # see mark_uniform_rows
+        self.uniform = np.zeros((nx, ny), dtype=np.bool_)  # see classify_rows
+        self.ends = np.zeros((nx, ny, 2, 6))  # the face weights of each row's end cells
         # small levels run on one thread: a parallel launch costs more than the work there
         self.small = np.prod(self.shape) < SERIAL_CELLS
         self.residual = residual_serial if self.small else residual
 
     def args(self):
-        return (self.w[0], self.w[1], self.w[2], self.periodic, self.uniform, self.coef)
+        return (self.w[0], self.w[1], self.w[2], self.periodic, self.uniform, self.ends, self.coef)
 
-    def mark_uniform_rows(self):
-        """Rows whose interior cells have every face open (after the weights change)."""
+    def classify_rows(self):
+        """After the weights change: the rows whose interior cells have every face open, and
+        the compact table of the rows' end-cell weights."""
         uniform_rows(*self.w, self.coef, self.uniform)
+        end_weights(*self.w, self.ends)
 
     def smooth(self, x, b, sweeps, reverse):
         if self.small:
@@ -472,7 +464,7 @@ class MultigridPoisson:
             for a in range(3):
                 lev.w[a] *= lev.coef[a]
         for lev in self.levels:
-            lev.mark_uniform_rows()
+            lev.classify_rows()
         self.active[...] = self._diag_positive(fine)  # cells with an open face
 
     @staticmethod
