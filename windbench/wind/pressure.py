@@ -20,13 +20,18 @@ with the coarse spacing (coefficient (h/H)^2 per axis); restriction = mean of th
 children, prolongation = injection (the transpose up to the factor 8), red-black
 successive over-relaxation smoothing, x_c += OMEGA ((b_c + sum_f w_f x_nb) / diag - x_c)
 with OMEGA = 1.15 (two sweeps down, the same in reverse order up, so the V-cycle is a
-symmetric positive definite preconditioner as CG needs, for any 0 < OMEGA < 2). The coarsest level gets many symmetric sweeps.
-Speed: rows of cells whose faces are all open (most of the air) are marked once per
-weight change (:func:`uniform_rows`); the smoother, residual and operator use the constant
-7-point stencil there, without reading any weight, and the general weighted stencil with
-bound and periodic checks only on boundary rows and cells. CG's vector updates are fused
-(:func:`cg_update`) and every reduction sums by planes, then over planes in order, so the
-numbers do not depend on the thread count. Without any pressure boundary (all
+symmetric positive definite preconditioner as CG needs, for any 0 < OMEGA < 2). The
+coarsest level gets many symmetric sweeps.
+
+Speed: the kernels work row by row along z. A row's x and y neighbour rows are found
+once, as views (wrapped on periodic axes, a zero row for the ghost beyond a wall), so each
+cell is plain contiguous reads. Rows whose cells have every face open (most of the air)
+are marked once per weight change (:func:`uniform_rows`) and use the constant 7-point
+stencil without reading any weight; the two end cells of every row take their weights
+from a compact table (:func:`end_weights`). Stores are written out in the loops: numba
+made a loop with an inlined storing helper three to four times slower. CG's vector
+updates are fused (:func:`cg_update`) and every reduction sums by planes, then over planes
+in order, so the numbers do not depend on the thread count. Without any pressure boundary (all
 walls/periodic) the constant is removed from the right-hand side and from every
 preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2 (relative residual),
 warm-started from the previous step's pressure.
