@@ -65,18 +65,23 @@ the shirt's tubes) and each pass solves every thread's linearised XPBD system ex
 cf. Deul et al. 2018, direct solver for rods): one pass carries the pull of a pin along the
 whole thread. Threads of one direction share no vertex, so a pass is block Gauss-Seidel
 with two blocks (warp, weft) instead of one block per edge. ``cloth.threads=false`` makes
-every edge a chain of its own (the edge-by-edge sweep, for comparison). Measured
-(``experiments/bench_cloth.py --stretch``, 4 s runs, default settings):
-flags in 6 m/s wind 0.9 / 1.6 / 2.0% median largest edge strain (was 5.0 / 7.2 / 11%); the
-hanging 40 x 25 flag 1.2% (was 11-12%); at the same cost per frame (the thread solve costs
-about what the edge sweep did, a sqrt and two divisions per edge). Not fixed: the hanging
-64 x 64 and 100 x 60 flags (14% and 27% at the end of 4 s; 23% and 25% before). Their
-flags collapse into full 90 degree shear along the pole (each weft thread hangs straight
-down from its pin), where the diagonal shear springs, compressed or stretched by 40-70%,
-push against the warp edges of the top row; with ``shear_stiffness=0`` the same flags hang
-at 2.7% and 3.2%, and the stiff solve itself converges slowly there (64 x 64: 6.4% at 32
-substeps x 16 passes, 4.7% at 64 x 16): the remaining strain is the diagonal-spring shear
-model in that degenerate state, not the propagation along threads.
+every edge a chain of its own (the edge-by-edge sweep, for comparison). A thread's forward
+elimination is one chain of dependent divisions, so a pass costs more than the
+colour-ordered edge sweep, whose independent edges the processor overlaps; but two passes
+over the threads hold the stretch better than four edge passes did, so the default is
+``cloth.edge_iterations=2``. Measured (``experiments/bench_cloth.py --stretch``, 4 s runs,
+defaults; the tables are in ``experiments/README.md``): flags in 6 m/s wind 0.9 / 2.0 /
+2.6% median largest edge strain at 40x25 / 64x64 / 100x60 (edge by edge, 4 passes: 5.0 /
+7.2 / 11%), the 40 x 25 flag hanging from its pole 1.6% (was 11-12%), at 3.0 / 12.7 /
+16.1 ms a frame (edge by edge, 4 passes: 2.8 / 10.1 / 17.4 ms). Not fixed: the hanging
+64 x 64 and 100 x 60 flags (26% and 30% at the end of 4 s; 14% and 27% with 4 passes; 23%
+and 25% edge by edge). They collapse into full 90 degree shear along the pole (each weft
+thread hangs straight down from its pin), where the diagonal shear springs, compressed or
+stretched by 40-70%, push against the warp edges of the top row; with
+``shear_stiffness=0`` the same flags hang at 2.7% and 3.2%, and the stiff solve itself
+converges slowly there (64 x 64: 6.4% at 32 substeps x 16 passes, 4.7% at 64 x 16): the
+remaining strain is the diagonal-spring shear model in that degenerate state, not the
+propagation along threads.
 
 The external forces (the aerodynamic forces of ``aero.py``, paper §3) are held constant
 over the substeps of one frame: the wind is sampled once per frame. This explicit coupling
@@ -88,13 +93,13 @@ Cost. A frame is one call of :func:`xpbd_frame` (all substeps, contacts, damping
 and energy of the divergence check), serial (the meshes are small and the machine's cores
 shared), with no allocation per frame: the substep constants alpha~ = alpha / h^2 are
 computed once per ``dt`` and the work space is kept by the solver. Measured on the 40 x 25
-flag (8 substeps, 4 edge passes), the hinge pass is about half the frame (one fast atan2 per
-hinge), the edge passes a third. Three orderings, fixed with the model, cut it without
+flag with the edge sweep (8 substeps, 4 edge passes), the hinge pass was about half the
+frame (one fast atan2 per hinge), the edge passes a third. Three orderings, fixed with the model, cut it without
 changing what is computed: contacts are tested only for vertices inside a body's bounding
 box grown by the margin (:func:`~windbench.cloth.collision.near_a_body`: the same contacts,
 bit for bit; the pole's cylinder cost a quarter of the frame before); the threads go by
-their distance from the pins, shear edges and hinges by colour within each band of equal distance from the pins
-(:func:`~windbench.cloth.topology.colour_order`): consecutive constraints then share no
+their distance from the pins, shear edges and hinges by colour within each band of equal
+distance from the pins (:func:`~windbench.cloth.topology.colour_order`): consecutive constraints then share no
 vertex and the processor overlaps them instead of waiting for each result, while the
 sweep still runs outwards from the pins band by band (the stretch of hanging and flying
 cloth stays within a few per cent of the pin-ordered sweep, measured).
@@ -262,7 +267,7 @@ def project_hinge(p, inv_mass, i0, i1, i2, i3, rest, alpha):
     p[i3, 2] += f3 * nbz
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, work):
     """One direct XPBD solve of each chain of distance constraints, in place.
 
@@ -578,7 +583,7 @@ class XPBDCloth:
         if not isinstance(substeps, int) or isinstance(substeps, bool) or substeps < 1:
             raise ConfigError("cloth.substeps", f"must be an integer >= 1, got {substeps!r}")
         self.substeps = substeps
-        iterations = _param(params, "edge_iterations", 4)
+        iterations = _param(params, "edge_iterations", 2)
         if not isinstance(iterations, int) or isinstance(iterations, bool) or iterations < 1:
             raise ConfigError(
                 "cloth.edge_iterations", f"must be an integer >= 1, got {iterations!r}"
