@@ -170,7 +170,7 @@ def apply_operator(x, wx, wy, wz, periodic, uniform, ends, coef, out):
 @njit(cache=True)
 def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
     """One colour of plane i. The stores are written out here: an inlined helper that
-    stores into an array made the loop three to four times slower (numba 0.6x)."""
+    stores into an array made the loop three to four times slower (numba 0.68)."""
     nz = x.shape[2]
     c0, c1, c2 = coef[0], coef[1], coef[2]
     # x_c <- (1 - OMEGA) x_c + OMEGA (b_c + s) / diag, diag = 2 (c0 + c1 + c2)
