@@ -59,10 +59,9 @@ def _cell_face_weights(wx, wy, wz, i, j, k):
 @njit(cache=True, inline="always")
 def _axis_neighbours(i, n, periodic):
     """Lower and upper neighbour of index i on an axis of n cells, each with a factor 1 when
-    it exists (inside, or wrapped on a periodic axis) and 0 when it is the ghost x = 0.
-    A ghost's index is i itself: the value read is multiplied by 0, and reading the far
-    side of the grid instead missed the cache on every cell of a boundary plane."""
-    i = np.int64(i)  # a prange index may be unsigned; keep every branch int64
+    it exists (inside, or wrapped on a periodic axis) and 0 when it is the ghost x = 0
+    (whose index is then i itself: a valid read, multiplied by 0). Used along z, for the
+    two end cells of a row (:func:`_end_sum`)."""
     lower_in, upper_in = i > 0, i < n - 1
     im = i - 1 if lower_in else (n - 1 if periodic else i)
     ip = i + 1 if upper_in else (0 if periodic else i)
