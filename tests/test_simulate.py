@@ -31,6 +31,7 @@ def test_each_scene_writes_a_readable_dataset(run_config, scene):
     assert ds.attrs["status"] == "complete" and ds.attrs["scene"] == scene
     assert ds.attrs["wind"] == "global" and ds.attrs["resolution"] == 16
     assert "grid:" in ds.attrs["config"] and ds.attrs["windbench_version"]
+    assert ds.attrs["numba_threads"] >= 1 and ds.attrs["cpu_count"] >= 1
     assert ds.sizes["time"] == 3 and ds.sizes["snapshot"] == 2
     assert ds["wind"].attrs["units"] == "m s-1" and ds["aero_force"].attrs["long_name"]
     assert list(ds.phase.values[:4]) == ["wind", "aero", "cloth", "total"]

@@ -9,6 +9,7 @@ same folder and renamed (``os.replace`` is atomic on POSIX).
 from __future__ import annotations
 
 import os
+import platform
 import subprocess
 import tempfile
 from importlib.metadata import PackageNotFoundError, version
@@ -42,6 +43,18 @@ def package_versions() -> dict[str, str]:
         except PackageNotFoundError:  # pragma: no cover
             out[f"version_{pkg.replace('-', '_')}"] = "not installed"
     return out
+
+
+def runtime_info() -> dict[str, object]:
+    """Where the timings (``step_seconds``) were taken: numba's thread count for the
+    parallel kernels, the machine's cores and platform."""
+    import numba
+
+    return {
+        "numba_threads": int(numba.get_num_threads()),
+        "cpu_count": int(os.cpu_count() or 0),
+        "platform": platform.platform(),
+    }
 
 
 def git_commit() -> str:

@@ -25,7 +25,7 @@ from windbench import metrics
 from windbench.aero import AeroParams, aerodynamic_forces
 from windbench.cloth import make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
-from windbench.dataset import annotate, git_commit, package_versions, write_atomic
+from windbench.dataset import annotate, git_commit, package_versions, runtime_info, write_atomic
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import inside
 from windbench.grid import Grid
@@ -271,6 +271,7 @@ class Recorder:
             steps_planned=s.n_steps,
             git_commit=git_commit(),
             **package_versions(),
+            **runtime_info(),
         )
         return annotate(ds)
 
