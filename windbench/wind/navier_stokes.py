@@ -10,7 +10,8 @@ One step of ``dt`` (operator splitting, each operator in its own module):
    u += (1 - exp(-k dt)) chi_i (w_i - u), chi_i = exp(-(d/r_c)^2), k =
    ``wind.source_relaxation`` (1/s), r_c = max(core_radius, h); a source/sink also
    emits its volume m (m^3/s) as a divergence spread over its core in the projection;
-3. advection (:mod:`.advection`): semi-Lagrangian with an RK2 backtrace, or limited
+3. advection (:mod:`.advection`): semi-Lagrangian with an RK2 backtrace (once per cell
+   centre, faces take the mean of their two cells' displacements), or limited
    MacCormack (``wind.advection``);
 4. implicit diffusion with kinematic viscosity ``wind.viscosity`` (:mod:`.diffusion`);
 5. pressure projection to the relative residual ``wind.pressure_tol`` (:mod:`.pressure`,
@@ -319,6 +320,7 @@ class NavierStokesWind(WindField):
         # state: the three padded face arrays, pressure (warm start) and work arrays
         self.q = [np.zeros(padded_shape(shape, a)) for a in range(3)]
         self.work = [np.zeros_like(x) for x in self.q]
+        self.disp = np.zeros(tuple(int(n) + 2 for n in shape) + (3,))  # advection.backtrace
         self.work2 = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
         self.qmin = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
         self.qmax = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
@@ -429,26 +431,31 @@ class NavierStokesWind(WindField):
         for a in range(3):
             boundaries.fill_boundary(arrays[a], a, self.kinds, self.planes[a], True)
 
-    def _carry(self, src, a, dt_h, out, qmin=None, qmax=None):
-        """out = src(x_back) for component a; with qmin/qmax also the limiter's bounds."""
+    def _carry(self, src, a, out, qmin=None, qmax=None):
+        """out = src(x - d) for component a, d the displacements in ``self.disp``; with
+        qmin/qmax also the limiter's bounds."""
         bounds = qmin is not None
-        u, v, w = self.q
         advection.advect(
-            src, a, u, v, w, self.cells, self.periodic, dt_h, out,
+            src, a, self.disp, self.cells, self.periodic, out,
             qmin if bounds else out, qmax if bounds else out, bounds,
         )  # fmt: skip
 
+    def _backtrace(self, dt_h):
+        advection.backtrace(*self.q, self.cells, self.periodic, dt_h, self.disp)
+
     def _advect(self, dt):
         dt_h = dt / self.h
+        self._backtrace(dt_h)
         if self.advection == "semi_lagrangian":
             for a in range(3):
-                self._carry(self.q[a], a, dt_h, self.work[a])
+                self._carry(self.q[a], a, self.work[a])
         else:
             for a in range(3):
-                self._carry(self.q[a], a, dt_h, self.work2[a], self.qmin[a], self.qmax[a])
+                self._carry(self.q[a], a, self.work2[a], self.qmin[a], self.qmax[a])
             self._fill(self.work2)
+            self._backtrace(-dt_h)  # the back step moves the same velocity field backwards
             for a in range(3):
-                self._carry(self.work2[a], a, -dt_h, self.work[a])
+                self._carry(self.work2[a], a, self.work[a])
                 advection.maccormack_correct(
                     self.q[a], self.work2[a], self.work[a], self.qmin[a], self.qmax[a], self.work[a]
                 )
