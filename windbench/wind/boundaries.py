@@ -75,23 +75,24 @@ def cells_beside(I, J, K, a):
     return I - 1, J - 1, K - 1, I - 1 - int(a == 0), J - 1 - int(a == 1), K - 1 - int(a == 2)
 
 
-@njit(cache=True)
-def _get(q, b, L, c1, c2):
+@njit(cache=True, inline="always")
+def _axis_first(q, b):
+    """q viewed with axis b first, the other two in increasing order (a face plane's
+    transverse lattice): plane L of the view is the padded layer L along b."""
     if b == 0:
-        return q[L, c1, c2]
+        return q.transpose((0, 1, 2))
     if b == 1:
-        return q[c1, L, c2]
-    return q[c1, c2, L]
+        return q.transpose((1, 0, 2))
+    return q.transpose((2, 0, 1))
 
 
 @njit(cache=True)
-def _set(q, b, L, c1, c2, value):
-    if b == 0:
-        q[L, c1, c2] = value
-    elif b == 1:
-        q[c1, L, c2] = value
-    else:
-        q[c1, c2, L] = value
+def _mirror(qb, ghost, inner, wall):
+    """qb[ghost] = 2 wall - qb[inner] (planes of an axis-first view): the wall value
+    halfway between the ghost and the inner cell."""
+    for c1 in range(qb.shape[1]):
+        for c2 in range(qb.shape[2]):
+            qb[ghost, c1, c2] = 2.0 * wall[c1, c2] - qb[inner, c1, c2]
 
 
 @njit(cache=True)
@@ -128,41 +129,36 @@ def fill_boundary(q, a, kinds, planes, set_normal):
     """
     P = q.shape
     for b in range(3):
+        qb = _axis_first(q, b)
         n_b = P[b] - 2 - (1 if b == a else 0)  # cells along b
-        c1n = P[0] if b != 0 else P[1]
-        c2n = P[2] if b != 2 else P[1]
         lo_kind = kinds[2 * b]
         hi_kind = kinds[2 * b + 1]
-        for c1 in range(c1n):
-            for c2 in range(c2n):
-                if b == a:
-                    lo_face, hi_face = 1, n_b + 1
-                    if lo_kind == PERIODIC:
-                        _set(q, b, hi_face, c1, c2, _get(q, b, lo_face, c1, c2))
-                        _set(q, b, 0, c1, c2, _get(q, b, hi_face - 1, c1, c2))
-                        _set(q, b, hi_face + 1, c1, c2, _get(q, b, lo_face + 1, c1, c2))
-                        continue
-                    for side in range(2):
-                        kind = lo_kind if side == 0 else hi_kind
-                        face = lo_face if side == 0 else hi_face
-                        ghost = 0 if side == 0 else hi_face + 1
-                        if set_normal and kind != OUTFLOW:
-                            _set(q, b, face, c1, c2, planes[2 * b + side, c1, c2])
-                        _set(q, b, ghost, c1, c2, _get(q, b, face, c1, c2))
-                else:
-                    if lo_kind == PERIODIC:
-                        _set(q, b, 0, c1, c2, _get(q, b, n_b, c1, c2))
-                        _set(q, b, n_b + 1, c1, c2, _get(q, b, 1, c1, c2))
-                        continue
-                    for side in range(2):
-                        kind = lo_kind if side == 0 else hi_kind
-                        inner = 1 if side == 0 else n_b
-                        ghost = 0 if side == 0 else n_b + 1
-                        val = _get(q, b, inner, c1, c2)
-                        if kind == SLIP or kind == OUTFLOW:
-                            _set(q, b, ghost, c1, c2, val)
-                        else:  # inflow, opening, no_slip: the wall value at the face
-                            _set(q, b, ghost, c1, c2, 2.0 * planes[2 * b + side, c1, c2] - val)
+        if b == a:  # the normal component: boundary faces 1 and n_b + 1, ghosts beyond
+            lo_face, hi_face = 1, n_b + 1
+            if lo_kind == PERIODIC:
+                qb[hi_face] = qb[lo_face]
+                qb[0] = qb[hi_face - 1]
+                qb[hi_face + 1] = qb[lo_face + 1]
+                continue
+            for side in range(2):
+                kind = lo_kind if side == 0 else hi_kind
+                face = lo_face if side == 0 else hi_face
+                if set_normal and kind != OUTFLOW:
+                    qb[face] = planes[2 * b + side, : qb.shape[1], : qb.shape[2]]
+                qb[0 if side == 0 else hi_face + 1] = qb[face]
+        else:  # a tangential component: ghost cells h/2 beyond the face
+            if lo_kind == PERIODIC:
+                qb[0] = qb[n_b]
+                qb[n_b + 1] = qb[1]
+                continue
+            for side in range(2):
+                kind = lo_kind if side == 0 else hi_kind
+                inner = 1 if side == 0 else n_b
+                ghost = 0 if side == 0 else n_b + 1
+                if kind == SLIP or kind == OUTFLOW:
+                    qb[ghost] = qb[inner]
+                else:  # inflow, opening, no_slip: the wall value at the face
+                    _mirror(qb, ghost, inner, planes[2 * b + side])
 
 
 def boundary_planes(kinds, wall_values, inflow_fn, lower, upper, h, shape):

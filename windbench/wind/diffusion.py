@@ -29,25 +29,38 @@ def error_bound_factor(alpha: float, active_axes: int) -> float:
 
 @njit(cache=True)
 def _plane(q, q0, I, colour, alpha, axes, free):
-    """Gauss-Seidel update of the faces of colour ``colour`` in the padded plane I."""
-    P0, P1, P2 = q.shape
+    """Gauss-Seidel update of the faces of colour ``colour`` in the padded plane I.
+
+    Row by row along K: the four neighbour rows are views found once per row and the
+    faces of one colour are counted (K = first + 2 m), which compiles to a loop about
+    twice as fast as a stepped range with run-time bounds; all three axes active (3D)
+    takes the branch-free stencil."""
+    P1, P2 = q.shape[1], q.shape[2]
     change = 0.0
     inv = 1.0 / (1.0 + 2.0 * alpha * (axes[0] + axes[1] + axes[2]))
+    all_axes = axes[0] != 0 and axes[1] != 0 and axes[2] != 0
     for J in range(1, P1 - 1):
-        for K in range(1 + (I + J + 1 + colour) % 2, P2 - 1, 2):  # (I + J + K) % 2 == colour
-            if not free[I, J, K]:
+        qc, q0c, fc = q[I, J], q0[I, J], free[I, J]
+        xm, xp, ym, yp = q[I - 1, J], q[I + 1, J], q[I, J - 1], q[I, J + 1]
+        first = 1 + (I + J + 1 + colour) % 2  # (I + J + K) % 2 == colour
+        for m in range((P2 - first) // 2):  # K = first, first + 2, ... <= P2 - 2
+            K = first + 2 * m
+            if not fc[K]:
                 continue
             # q = (q0 + alpha sum nb) / (1 + 2 alpha d), d = number of active axes
-            nb = 0.0
-            if axes[0]:
-                nb += q[I - 1, J, K] + q[I + 1, J, K]
-            if axes[1]:
-                nb += q[I, J - 1, K] + q[I, J + 1, K]
-            if axes[2]:
-                nb += q[I, J, K - 1] + q[I, J, K + 1]
-            new = (q0[I, J, K] + alpha * nb) * inv
-            change = max(change, abs(new - q[I, J, K]))
-            q[I, J, K] = new
+            if all_axes:
+                nb = (xm[K] + xp[K]) + (ym[K] + yp[K]) + (qc[K - 1] + qc[K + 1])
+            else:
+                nb = 0.0
+                if axes[0]:
+                    nb += xm[K] + xp[K]
+                if axes[1]:
+                    nb += ym[K] + yp[K]
+                if axes[2]:
+                    nb += qc[K - 1] + qc[K + 1]
+            new = (q0c[K] + alpha * nb) * inv
+            change = max(change, abs(new - qc[K]))
+            qc[K] = new
     return change
 
 
