@@ -53,8 +53,9 @@ def test_operator_and_residual_match_the_stencil_written_out(periodic):
     x, b = rng.random(SHAPE), rng.random(SHAPE)
     expected = _operator_numpy(x, lev.w, periodic)
     out = np.empty(SHAPE)
-    pressure.apply_operator(x, *lev.args(), out)
+    xax = pressure.apply_operator(x, *lev.args(), out)
     np.testing.assert_allclose(out, expected, rtol=1e-13, atol=1e-13)
+    assert xax == pressure.dot(x, out)  # the fused x . A x: the same sum, the same bits
     pressure.residual(x, b, *lev.args(), out)
     np.testing.assert_allclose(out, b - expected, rtol=1e-13, atol=1e-13)
     pressure.residual_serial(x, b, *lev.args(), out)

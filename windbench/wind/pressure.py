@@ -161,9 +161,13 @@ def residual(x, b, wx, wy, wz, periodic, uniform, ends, coef, out):
 
 @njit(cache=True, parallel=True)
 def apply_operator(x, wx, wy, wz, periodic, uniform, ends, coef, out):
-    """out = A x = sum_f c w_f (x_c - x_nb)."""
+    """out = A x = sum_f c w_f (x_c - x_nb); returns x . A x, summed as :func:`dot` does
+    (plane by plane while the plane is in cache: one pass less per CG iteration)."""
+    partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
         _operator_plane(x, x, wx, wy, wz, periodic, uniform, ends, coef, i, out, False)
+        partial[i] = _plane_dot(x, out, i)
+    return partial.sum()
 
 
 @njit(cache=True)
@@ -328,17 +332,22 @@ def coarsen_weights(fine, a, ratio, coarse):
                 coarse[I, J, K] = acc * inv
 
 
+@njit(cache=True, inline="always")
+def _plane_dot(a, b, i):
+    """sum a[i] b[i] over plane i, rows in order."""
+    acc = 0.0
+    for j in range(a.shape[1]):
+        for k in range(a.shape[2]):
+            acc += a[i, j, k] * b[i, j, k]
+    return acc
+
+
 @njit(cache=True, parallel=True)
 def dot(a, b):
     """sum a b, by planes then over the planes in order (the same bits on any thread count)."""
-    n0, n1, n2 = a.shape
-    partial = np.empty(n0)
-    for i in prange(n0):
-        acc = 0.0
-        for j in range(n1):
-            for k in range(n2):
-                acc += a[i, j, k] * b[i, j, k]
-        partial[i] = acc
+    partial = np.empty(a.shape[0])
+    for i in prange(a.shape[0]):
+        partial[i] = _plane_dot(a, b, i)
     return partial.sum()
 
 
@@ -524,8 +533,7 @@ class MultigridPoisson:
         it = 0
         while it < max_iterations:
             it += 1
-            apply_operator(p, *fine.args(), q)
-            alpha = rz / dot(p, q)
+            alpha = rz / apply_operator(p, *fine.args(), q)  # p . A p
             rnorm = np.sqrt(cg_update(alpha, p, q, x, r))
             if rnorm <= tol * bnorm:
                 break
