@@ -127,25 +127,33 @@ def divergence_norms(u, v, w, target, solid):
     squares = np.zeros(nx)
     count = np.zeros(nx, dtype=np.int64)
     for i in prange(nx):
+        top, sq, cnt = 0.0, 0.0, 0  # per plane in registers, stored once
         for j in range(ny):
             for k in range(nz):
                 if solid[i, j, k]:
                     continue
                 d = abs(_outward_flux(u, v, w, i, j, k) - target[i, j, k])
-                peak[i] = max(peak[i], d)
-                squares[i] += d * d
-                count[i] += 1
+                top = max(top, d)
+                sq += d * d
+                cnt += 1
+        peak[i], squares[i], count[i] = top, sq, cnt
     return peak.max(), squares.sum(), count.sum()
 
 
 @njit(cache=True, parallel=True)
-def max_abs(q):
-    """max |q| (planes in parallel; a max is order-independent)."""
+def max_abs(q, copy_to, copy):
+    """max |q| (planes in parallel; a max is order-independent); with ``copy`` also
+    copy_to = q in the same pass."""
     peak = np.zeros(q.shape[0])
     for i in prange(q.shape[0]):
+        top = 0.0
         for j in range(q.shape[1]):
             for k in range(q.shape[2]):
-                peak[i] = max(peak[i], abs(q[i, j, k]))
+                x = q[i, j, k]
+                top = max(top, abs(x))
+                if copy:
+                    copy_to[i, j, k] = x
+        peak[i] = top
     return peak.max()
 
 
@@ -489,11 +497,11 @@ class NavierStokesWind(WindField):
         alpha = self.viscosity * dt / self.h**2
         if alpha == 0.0:
             return 0
-        scale = max(max(max_abs(x) for x in self.q), self.scene.reference_speed)
+        # the field's scale, and work = the right-hand side q0 (the same pass)
+        peak = max(max_abs(self.q[a], self.work[a], True) for a in range(3))
+        scale = max(peak, self.scene.reference_speed)
         changes = np.zeros(max(x.shape[0] for x in self.q))
         bound = diffusion.error_bound_factor(alpha, int(self.axes.sum()))
-        for a in range(3):
-            self.work[a][...] = self.q[a]
         sweeps = 0
         while sweeps < DIFFUSION_MAX_SWEEPS:
             sweeps += 1
@@ -582,7 +590,7 @@ class NavierStokesWind(WindField):
         t4 = time.perf_counter()
         peak, squares, count = divergence_norms(*self.q, self.target, self.solid)
         scale = 1.0 / self.scene.reference_speed  # h div u / U_ref
-        speed = max(max_abs(x) for x in self.q)
+        speed = max(max_abs(x, x, False) for x in self.q)
         self._stats = {
             "pressure_iterations": float(iters),
             "pressure_residual": float(res),
