@@ -88,7 +88,7 @@ def test_gauss_seidel_fast_path_and_serial_sweeps_solve_the_same_cells():
     lev = _level(rng)
     x0, b = rng.random(SHAPE), rng.random(SHAPE)
     x = x0.copy()
-    pressure.gauss_seidel(x, b, *lev.args(), 0)
+    pressure.gauss_seidel(x, b, *lev.args(), 0, 1)  # one red half sweep
     diag = sum(  # sum_f w_f: the diagonal of A
         np.take(lev.w[a], np.arange(SHAPE[a]) + s, axis=a) for a in range(3) for s in (0, 1)
     )
@@ -99,8 +99,8 @@ def test_gauss_seidel_fast_path_and_serial_sweeps_solve_the_same_cells():
     np.testing.assert_allclose(x, expected, rtol=1e-13, atol=1e-13)
     parallel, serial = x0.copy(), x0.copy()
     for colour in (1, 0, 1, 0):
-        pressure.gauss_seidel(parallel, b, *lev.args(), colour)
-    pressure.gauss_seidel_serial(serial, b, *lev.args(), 2, True)
+        pressure.gauss_seidel(parallel, b, *lev.args(), colour, 1)
+    pressure.gauss_seidel_serial(serial, b, *lev.args(), 1, 4)
     np.testing.assert_array_equal(parallel, serial)
 
 

@@ -229,31 +229,33 @@ def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
 
 
 @njit(cache=True, parallel=True)
-def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour):
-    """One colour (cells with (i+j+k) % 2 == colour) of red-black SOR (``OMEGA``) on A x = b.
+def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour, halves):
+    """``halves`` half sweeps of red-black SOR (``OMEGA``) on A x = b, alternating colours
+    from ``colour`` (cells with (i+j+k) % 2 == colour first), planes in parallel: a
+    V-cycle's smoothing on one level is one call (a Python call per half sweep cost more
+    than a tenth of the step at 64^3).
 
     On a periodic x axis with an odd number of planes the last plane neighbours the first
     one in the same colour: it is done after the parallel loop (no race, bit-reproducible).
     """
     nx = x.shape[0]
     last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
-    for i in prange(last):
-        _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour)
-    for i in range(last, nx):
-        _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour)
+    for half in range(halves):
+        c = (colour + half) % 2
+        for i in prange(last):
+            _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, c)
+        for i in range(last, nx):
+            _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, c)
 
 
 @njit(cache=True)
-def gauss_seidel_serial(x, b, wx, wy, wz, periodic, uniform, ends, coef, sweeps, reverse):
-    """``sweeps`` red-black sweeps (black first if ``reverse``) on one thread, in one call:
-    small levels, where a thread start-up or a Python call per half sweep costs more than
-    the work. Cells of one colour do not neighbour each other: the bits of
-    :func:`gauss_seidel`."""
-    for _ in range(sweeps):
-        for half in range(2):
-            colour = 1 - half if reverse else half
-            for i in range(x.shape[0]):
-                _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour)
+def gauss_seidel_serial(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour, halves):
+    """:func:`gauss_seidel` on one thread: small levels, where a thread start-up costs
+    more than the work. Cells of one colour do not neighbour each other: the same bits."""
+    for half in range(halves):
+        c = (colour + half) % 2
+        for i in range(x.shape[0]):
+            _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, c)
 
 
 @njit(cache=True)
@@ -455,12 +457,9 @@ class _Level:
         end_weights(*self.w, self.ends)
 
     def smooth(self, x, b, sweeps, reverse):
-        if self.small:
-            gauss_seidel_serial(x, b, *self.args(), sweeps, reverse)
-            return
-        for _ in range(sweeps):
-            for colour in (1, 0) if reverse else (0, 1):
-                gauss_seidel(x, b, *self.args(), colour)
+        """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call)."""
+        kernel = gauss_seidel_serial if self.small else gauss_seidel
+        kernel(x, b, *self.args(), 1 if reverse else 0, 2 * sweeps)
 
 
 class MultigridPoisson:
