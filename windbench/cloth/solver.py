@@ -89,7 +89,8 @@ edges in every one of 16 passes keeps the other diagonals within +-3% but leaves
 corner crushed and the top row stretched by 9% / 11% (64 x 64 / 100 x 60): a fold from
 the top pin that turns the top edge down the pole follows cell diagonals only where the pin
 is a degree-8 vertex of the alternating triangulation and the cells are square (100 x 61:
-6%, 64 x 65: 7%, same 16 passes); 32 substeps give 4.9% (64 x 64) at four times the cost.
+6%, 64 x 65: 7%, same 16 passes); 32 substeps give 4.9% (64 x 64) and 8.1% (100 x 60) at
+four times the cost, 3.3% on a 100 x 61 flag.
 
 The external forces (the aerodynamic forces of ``aero.py``, paper §3) are held constant
 over the substeps of one frame: the wind is sampled once per frame. This explicit coupling
