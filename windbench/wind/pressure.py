@@ -1,5 +1,5 @@
 """Pressure projection (paper §4.1.1, the Helmholtz-Hodge step of Stam 1999/2003):
-conjugate gradients preconditioned by one geometric multigrid V-cycle (MGPCG, McAdams,
+conjugate gradients preconditioned by one geometric multigrid cycle (MGPCG, McAdams,
 Sifakis and Teran 2010), on a face-weighted cell mask.
 
 The unknown is psi = p dt / (rho h) on cell centres; the projected face velocity is
@@ -19,9 +19,11 @@ coarse face weight = mean of the fine face weights it covers, operator re-discre
 with the coarse spacing (coefficient (h/H)^2 per axis); restriction = mean of the
 children, prolongation = injection (the transpose up to the factor 8), red-black
 successive over-relaxation smoothing, x_c += OMEGA ((b_c + sum_f w_f x_nb) / diag - x_c)
-with OMEGA = 1 (two sweeps down, the same in reverse order up, so the V-cycle is a
+with OMEGA = 1 (two sweeps down, the same in reverse order up, so the cycle is a
 symmetric positive definite preconditioner as CG needs, for any 0 < OMEGA < 2). The
-coarsest level gets many symmetric sweeps. The whole V-cycle runs in single precision
+coarsest level gets many symmetric sweeps. The first two coarse levels correct twice from
+the next level (a W there, ``W_LEVELS``), the others once (a V): five iterations at every
+size measured. The whole cycle runs in single precision
 (``PRECONDITIONER_DTYPE``) while CG stays in double: the same iteration counts and a
 pressure within 1e-8 (relative) of an all-float64 solve, in a fifth less time at 128^3
 (one core, A/B in one process; tested: it still reaches a relative residual of 1e-10).
@@ -46,7 +48,13 @@ import numpy as np
 from numba import njit, prange
 
 SERIAL_CELLS = 32768  # levels with fewer cells are smoothed on one thread
-PRE_SWEEPS = 2  # per level and direction: 5-7 iterations to 1e-6 at 32^3..128^3 (fence)
+PRE_SWEEPS = 2  # per level and direction
+# Levels whose coarse-grid correction is two cycles of the next level (a W on the first
+# coarse levels, a V below): 5 / 5 / 5 MGPCG iterations to 1e-6 at 32^3 / 64^3 / 128^3 on
+# the fence against 6 / 6 / 7 with a plain V-cycle (one solve, A/B in one process: 6 / 31 /
+# 157 ms against 7 / 34 / 204 ms); (1,) alone saved no iteration at 64^3 and 128^3, (1, 2, 3)
+# no more time.
+W_LEVELS = (1, 2)
 # Over-relaxation of the smoother. 1.15 saves one iteration at 32^3 and 64^3 (5 and 6 to
 # 1e-6 on the fence) but not at 128^3 (7): the iteration ratio 128^3 / 32^3 then rises
 # from 7/6 = 1.17 to 1.4, over the 1.3 that marks a resolution-independent solver.
@@ -518,24 +526,33 @@ class MultigridPoisson:
         ) > 0
 
     def vcycle(self, r, z):
-        """z = M r: one symmetric V-cycle from a zero guess, in PRECONDITIONER_DTYPE."""
+        """z = M r: one symmetric multigrid cycle from a zero guess (V-shaped, W-shaped
+        on the levels of W_LEVELS), in PRECONDITIONER_DTYPE."""
         levels = self.levels
         cast_copy(r, levels[0].b)
         levels[0].x[...] = 0.0
-        for lev, nxt in zip(levels[:-1], levels[1:], strict=True):
-            lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
-            lev.residual(lev.x, lev.b, *lev.args(), lev.r)
-            restrict_mean(lev.r, lev.ratio, nxt.b)
-            nxt.x[...] = 0.0
-        last = levels[-1]
-        last.smooth(last.x, last.b, self.coarse_sweeps, reverse=False)
-        last.smooth(last.x, last.b, self.coarse_sweeps, reverse=True)
-        for lev, nxt in zip(levels[-2::-1], levels[:0:-1], strict=True):
-            prolong_add(nxt.x, lev.ratio, lev.x)
-            lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=True)
+        self._cycle(0)
         cast_copy(levels[0].x, z)
         if self.singular:
             remove_mean(z, self.active)
+
+    def _cycle(self, n: int):
+        """Level n from its current guess: smooth, correct from level n + 1 (twice on the
+        W_LEVELS, each time from the coarse guess so far), smooth in reverse order."""
+        lev = self.levels[n]
+        if n == len(self.levels) - 1:  # coarsest: many symmetric sweeps
+            lev.smooth(lev.x, lev.b, self.coarse_sweeps, reverse=False)
+            lev.smooth(lev.x, lev.b, self.coarse_sweeps, reverse=True)
+            return
+        nxt = self.levels[n + 1]
+        lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
+        lev.residual(lev.x, lev.b, *lev.args(), lev.r)
+        restrict_mean(lev.r, lev.ratio, nxt.b)
+        nxt.x[...] = 0.0
+        for _ in range(2 if n in W_LEVELS else 1):
+            self._cycle(n + 1)
+        prolong_add(nxt.x, lev.ratio, lev.x)
+        lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=True)
 
     def solve(self, x, b, tol: float, max_iterations: int, atol: float = 0.0):
         """Solve A x = b in place from the guess in x; return (iterations, relative residual)."""
