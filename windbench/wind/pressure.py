@@ -59,11 +59,11 @@ W_LEVELS = (1, 2)
 # 1e-6 on the fence) but not at 128^3 (7): the iteration ratio 128^3 / 32^3 then rises
 # from 7/6 = 1.17 to 1.4, over the 1.3 that marks a resolution-independent solver.
 OMEGA = 1.0
-# The V-cycle (the preconditioner) works in single precision: it only has to approximate
-# A^-1; CG's vectors, residual and stopping test stay in double precision, so the pressure
-# still meets the relative residual tolerance in float64. Half the bytes per sweep: the
-# 128^3 levels do not fit in the cache. The face weights are exact in float32 (0, 1 and
-# means of them times powers of 1/4).
+# The multigrid cycle (the preconditioner) works in single precision: it only has to
+# approximate A^-1; CG's vectors, residual and stopping test stay in double precision, so
+# the pressure still meets the relative residual tolerance in float64. Half the bytes per
+# sweep: the 128^3 levels do not fit in the cache. The face weights are exact in float32
+# (0, 1 and means of them times powers of 1/4).
 PRECONDITIONER_DTYPE = np.float32
 
 
@@ -240,7 +240,7 @@ def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
 def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour, halves):
     """``halves`` half sweeps of red-black SOR (``OMEGA``) on A x = b, alternating colours
     from ``colour`` (cells with (i+j+k) % 2 == colour first), planes in parallel: a
-    V-cycle's smoothing on one level is one call (the Python loop of one call per half
+    cycle's smoothing on one level is one call (the Python loop of one call per half
     sweep cost about 2 ms per step at 64^3, measured with cProfile).
 
     On a periodic x axis with an odd number of planes the last plane neighbours the first
