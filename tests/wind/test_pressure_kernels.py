@@ -109,10 +109,16 @@ def test_dot_and_cg_update_match_numpy():
     p, q, x, r = (rng.random(SHAPE) for _ in range(4))
     assert pressure.dot(p, q) == pytest.approx(float(np.sum(p * q)), rel=1e-13)
     x_ref, r_ref = x + 0.3 * p, r - 0.3 * q
-    rr = pressure.cg_update(0.3, p, q, x, r)
+    r_low = np.zeros(SHAPE, np.float32)
+    rr = pressure.cg_update(0.3, p, q, x, r, r_low)
+    np.testing.assert_array_equal(r_low, r_ref.astype(np.float32))
     np.testing.assert_allclose(x, x_ref, rtol=1e-15)
     np.testing.assert_allclose(r, r_ref, rtol=1e-15)
     assert rr == pytest.approx(float(np.sum(r_ref**2)), rel=1e-13)
+    z = np.empty(SHAPE)  # the preconditioned residual back in float64, and r . z
+    rz = pressure.cast_dot(r_low, z, r)
+    np.testing.assert_array_equal(z, r_low.astype(np.float64))
+    assert rz == pressure.dot(r, z)
 
 
 def test_mgpcg_with_a_single_precision_v_cycle_reaches_double_precision_accuracy():

@@ -377,8 +377,9 @@ def dot(a, b):
 
 
 @njit(cache=True, parallel=True)
-def cg_update(alpha, p, q, x, r):
-    """x += alpha p, r -= alpha q; return r . r (by planes, thread-count independent)."""
+def cg_update(alpha, p, q, x, r, r_low):
+    """x += alpha p, r -= alpha q, r_low = r in r_low's precision (the next cycle's
+    right-hand side, in the same pass); return r . r (by planes, thread-count independent)."""
     n0, n1, n2 = x.shape
     partial = np.empty(n0)
     for i in prange(n0):
@@ -388,6 +389,7 @@ def cg_update(alpha, p, q, x, r):
                 x[i, j, k] += alpha * p[i, j, k]
                 rr = r[i, j, k] - alpha * q[i, j, k]
                 r[i, j, k] = rr
+                r_low[i, j, k] = rr
                 acc += rr * rr
         partial[i] = acc
     return partial.sum()
@@ -410,6 +412,21 @@ def cast_copy(src, dst):
         for j in range(src.shape[1]):
             for k in range(src.shape[2]):
                 dst[i, j, k] = src[i, j, k]
+
+
+@njit(cache=True, parallel=True)
+def cast_dot(src, dst, r):
+    """dst = src converted to dst's dtype; returns r . dst, summed as :func:`dot` does (the
+    same bits), in the same pass."""
+    partial = np.empty(src.shape[0])
+    for i in prange(src.shape[0]):
+        acc = 0.0
+        for j in range(src.shape[1]):
+            for k in range(src.shape[2]):
+                dst[i, j, k] = src[i, j, k]
+                acc += r[i, j, k] * dst[i, j, k]
+        partial[i] = acc
+    return partial.sum()
 
 
 @njit(cache=True)
@@ -525,16 +542,23 @@ class MultigridPoisson:
             + (w[2][:, :, :-1] + w[2][:, :, 1:])
         ) > 0
 
-    def vcycle(self, r, z):
+    def vcycle(self, r, z) -> float:
         """z = M r: one symmetric multigrid cycle from a zero guess (V-shaped, W-shaped
-        on the levels of W_LEVELS), in PRECONDITIONER_DTYPE."""
-        levels = self.levels
-        cast_copy(r, levels[0].b)
-        levels[0].x[...] = 0.0
+        on the levels of W_LEVELS), in PRECONDITIONER_DTYPE; returns r . z."""
+        cast_copy(r, self.levels[0].b)
+        return self._precondition(r, z)
+
+    def _precondition(self, r, z) -> float:
+        """z = M r with r already in the finest level's b (:func:`cg_update` puts it
+        there); returns r . z (fused with the conversion of z unless A is singular)."""
+        fine = self.levels[0]
+        fine.x[...] = 0.0
         self._cycle(0)
-        cast_copy(levels[0].x, z)
-        if self.singular:
-            remove_mean(z, self.active)
+        if not self.singular:
+            return cast_dot(fine.x, z, r)
+        cast_copy(fine.x, z)
+        remove_mean(z, self.active)
+        return dot(r, z)
 
     def _cycle(self, n: int):
         """Level n from its current guess: smooth, correct from level n + 1 (twice on the
@@ -569,18 +593,16 @@ class MultigridPoisson:
             return 0, 0.0
         if rnorm <= tol * bnorm:
             return 0, rnorm / bnorm
-        self.vcycle(r, z)
+        rz = self.vcycle(r, z)
         p[...] = z
-        rz = dot(r, z)
         it = 0
         while it < max_iterations:
             it += 1
             alpha = rz / apply_operator(p, *fine.args(), q)  # p . A p
-            rnorm = np.sqrt(cg_update(alpha, p, q, x, r))
+            rnorm = np.sqrt(cg_update(alpha, p, q, x, r, fine.b))
             if rnorm <= tol * bnorm:
                 break
-            self.vcycle(r, z)
-            rz_new = dot(r, z)
+            rz_new = self._precondition(r, z)
             xpby(z, rz_new / rz, p)
             rz = rz_new
         return it, rnorm / bnorm
