@@ -738,8 +738,11 @@ class XPBDCloth:
         at rest), and the substeps divide into such steps; else 1 (every substep)."""
         n = self.bend_every_max
         compliance = self._hinge_arrays[2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            omega_h2 = np.where(compliance > 0, self._hinge_weights / (compliance * inv_h**2), 0)
+        weights = self._hinge_weights
+        with np.errstate(divide="ignore", invalid="ignore"):  # a rigid hinge: never resolved
+            omega_h2 = np.where(
+                compliance > 0, weights / (compliance * inv_h**2), np.where(weights > 0, np.inf, 0)
+            )
         resolved = omega_h2.size == 0 or n * n * float(np.max(omega_h2)) <= BEND_RESOLVED
         return n if (resolved and self.substeps % n == 0) else 1
 
