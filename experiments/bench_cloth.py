@@ -54,22 +54,28 @@ STRETCH_OUT = OUT.with_name("stretch_cloth.csv")
 STRETCH_FRAMES = 240  # 4 s
 
 
-def stretch_case(resolution, still: bool, extra: list[str]) -> dict:
-    """Largest warp/weft edge strain per frame of a 4 s flag run (still air or wind)."""
+def flag_simulation(resolution, frames: int, still: bool, extra: list[str]) -> Simulation:
+    """The flag scene with a ``nu x nv`` flag for ``frames`` frames, in its 6 m/s wind or,
+    with ``still``, hanging from its pole in still air (also used by hang_cloth.py)."""
     nu, nv = resolution
     cfg = compose_config(
         [
             "scene=flag",
             "wind=global",
             f"scene.cloths.0.resolution=[{nu},{nv}]",
-            f"sim.duration={STRETCH_FRAMES / 60.0}",
+            f"sim.duration={frames / 60.0}",
             "sim.progress=false",
             "grid.resolution=16",
             *(["scene.sources=[]"] if still else []),
             *extra,
         ]
     )
-    sim = Simulation(prepare(cfg))
+    return Simulation(prepare(cfg))
+
+
+def stretch_case(resolution, still: bool, extra: list[str]) -> dict:
+    """Largest warp/weft edge strain per frame of a 4 s flag run (still air or wind)."""
+    sim = flag_simulation(resolution, STRETCH_FRAMES, still, extra)
     strain = []
     for n in range(STRETCH_FRAMES):
         sim.step(n)

@@ -16,9 +16,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-
-from windbench.cli import compose_config
-from windbench.simulate import Simulation, prepare
+from bench_cloth import flag_simulation  # experiments/ is the script's folder
 
 
 def shear_angles(x: np.ndarray, nu: int, nv: int) -> np.ndarray:
@@ -40,19 +38,7 @@ def main() -> None:
     args = parser.parse_intermixed_args()
     nu, nv = args.nu, args.nv
     at = {int(a) for a in args.at.split(",") if a}
-    cfg = compose_config(
-        [
-            "scene=flag",
-            "wind=global",
-            f"scene.cloths.0.resolution=[{nu},{nv}]",
-            f"sim.duration={args.frames / 60.0}",
-            "sim.progress=false",
-            "grid.resolution=16",
-            "scene.sources=[]",
-            *args.overrides,
-        ]
-    )
-    sim = Simulation(prepare(cfg))
+    sim = flag_simulation((nu, nv), args.frames, True, args.overrides)
     solver = sim.cloth_solver
     edges, rest = solver._edge_arrays[0], solver._edge_arrays[1]
     ns = solver.n_stretch

@@ -724,7 +724,6 @@ class XPBDCloth:
             self.inv_mass,
             self._hinge_arrays[0],
         )
-        self.bend_every_max = BEND_EVERY
         self.bend_every = 1
         self._scratch_x = np.empty((model.n_vertices, 3))  # work space of xpbd_frame
         self._scratch_lambda = np.empty(topo.edges.shape[0])
@@ -736,7 +735,7 @@ class XPBDCloth:
         """BEND_EVERY when every hinge's own oscillation is resolved by a step of that many
         substeps, (omega N h)^2 = N^2 S / alpha~ <= BEND_RESOLVED (S: :func:`hinge_weights`
         at rest), and the substeps divide into such steps; else 1 (every substep)."""
-        n = self.bend_every_max
+        n = BEND_EVERY
         compliance = self._hinge_arrays[2]
         weights = self._hinge_weights
         with np.errstate(divide="ignore", invalid="ignore"):  # a rigid hinge: never resolved

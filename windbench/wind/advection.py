@@ -96,7 +96,7 @@ def _keep_inside(p, n, periodic):
     if 0.0 <= p <= n:
         return p
     if periodic:
-        return p - n * math.floor(p / n)
+        return _wrap(p, n, True)
     return min(max(p, 0.0), n)
 
 

@@ -22,11 +22,12 @@ successive over-relaxation smoothing, x_c += OMEGA ((b_c + sum_f w_f x_nb) / dia
 with OMEGA = 1 (two sweeps down, the same in reverse order up, so the cycle is a
 symmetric positive definite preconditioner as CG needs, for any 0 < OMEGA < 2). The
 coarsest level gets many symmetric sweeps. The first two coarse levels correct twice from
-the next level (a W there, ``W_LEVELS``), the others once (a V): five iterations at every
-size measured. The whole cycle runs in single precision
-(``PRECONDITIONER_DTYPE``) while CG stays in double: the same iteration counts and a
-pressure within 1e-8 (relative) of an all-float64 solve, in a fifth less time at 128^3
-(one core, A/B in one process; tested: it still reaches a relative residual of 1e-10).
+the next level (a W there, ``W_LEVELS``), the others once (a V): 5.0 / 5.4 / 5.9
+iterations per step at 32^3 / 64^3 / 128^3 on the fence (mean over 30 steps). The whole
+cycle runs in single precision (``PRECONDITIONER_DTYPE``) while CG stays in double: the
+same iteration counts and a pressure within 1e-8 (relative) of an all-float64 solve, in
+15% less time at 128^3 on one core (A/B in one process; tested: it still reaches a
+relative residual of 1e-10).
 
 Speed: the kernels work row by row along z. A row's x and y neighbour rows are found
 once, as views (wrapped on periodic axes, a zero row for the ghost beyond a wall), so each
@@ -51,8 +52,9 @@ SERIAL_CELLS = 32768  # levels with fewer cells are smoothed on one thread
 PRE_SWEEPS = 2  # per level and direction
 # Levels whose coarse-grid correction is two cycles of the next level (a W on the first
 # coarse levels, a V below): 5 / 5 / 5 MGPCG iterations to 1e-6 at 32^3 / 64^3 / 128^3 on
-# the fence against 6 / 6 / 7 with a plain V-cycle (one solve, A/B in one process: 6 / 31 /
-# 157 ms against 7 / 34 / 204 ms); (1,) alone saved no iteration at 64^3 and 128^3, (1, 2, 3)
+# the fence against 6 / 6 / 7 with a plain V-cycle (one solve, two threads, A/B in one
+# process: 6 / 31 / 157 ms against 7 / 34 / 204 ms; over 30 steps 5.0 / 5.4 / 5.9 against
+# 5.8 / 6.3 / 7.0 iterations); (1,) alone saved no iteration at 64^3 and 128^3, (1, 2, 3)
 # no more time.
 W_LEVELS = (1, 2)
 # Over-relaxation of the smoother. 1.15 saves one iteration at 32^3 and 64^3 (5 and 6 to
