@@ -34,8 +34,14 @@ once, as views (wrapped on periodic axes, a zero row for the ghost beyond a wall
 cell is plain contiguous reads. Rows whose cells have every face open (most of the air)
 are marked once per weight change (:func:`uniform_rows`) and use the constant 7-point
 stencil without reading any weight; the two end cells of every row take their weights
-from a compact table (:func:`end_weights`). Stores are written out in the loops: numba
-made a loop with an inlined storing helper three to four times slower. CG's vector
+from a compact table (:func:`end_weights`); the constant-stencil rows are done in a loop
+of their own with neighbour views taken without a condition, which made the smoother about
+1.9 times as fast as one loop over all rows (one core). Stores are written out in the
+loops: numba made a loop with an inlined storing helper three to four times slower. The
+levels below ``SERIAL_CELLS`` cells run as one compiled call per visit on flat per-cell
+tables (:mod:`.coarse_levels`): there the calls and the per-row set-up, not the arithmetic,
+had cost the time (projection 11.3 -> 8.8 ms at 32^3, 31.7 -> 28.0 ms at 64^3, one core,
+A/B in one process). CG's vector
 updates are fused (:func:`cg_update`) and every reduction sums by planes, then over planes
 in order, so the numbers do not depend on the thread count. Without any pressure boundary (all
 walls/periodic) the constant is removed from the right-hand side and from every
@@ -48,7 +54,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-SERIAL_CELLS = 32768  # levels with fewer cells are smoothed on one thread
+from windbench.wind.coarse_levels import CoarseLevels
+
+SERIAL_CELLS = 32768  # levels with fewer cells run on one thread (:mod:`.coarse_levels`)
 PRE_SWEEPS = 2  # per level and direction
 # Levels whose coarse-grid correction is two cycles of the next level (a W on the first
 # coarse levels, a V below): 5 / 5 / 5 MGPCG iterations to 1e-6 at 32^3 / 64^3 / 128^3 on
@@ -309,23 +317,6 @@ def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour, halves
 
 
 @njit(cache=True)
-def gauss_seidel_serial(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour, halves):
-    """:func:`gauss_seidel` on one thread: small levels, where a thread start-up costs
-    more than the work. Cells of one colour do not neighbour each other: the same bits."""
-    for half in range(halves):
-        c = (colour + half) % 2
-        for i in range(x.shape[0]):
-            _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, c)
-
-
-@njit(cache=True)
-def residual_serial(x, b, wx, wy, wz, periodic, uniform, ends, coef, out):
-    """:func:`residual` on one thread (small levels)."""
-    for i in range(x.shape[0]):
-        _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, True)
-
-
-@njit(cache=True)
 def uniform_rows(wx, wy, wz, coef, out):
     """out[i, j] = every face of the cells k = 1..nz-2 of interior row (i, j) has the
     weight coef[axis], i.e. all open: the kernels then use the constant stencil there."""
@@ -520,9 +511,8 @@ class _Level:
         self.ratio = np.ones(3, dtype=np.int64)  # to the next coarser level
         self.uniform = np.zeros((nx, ny), dtype=np.bool_)  # see classify_rows
         self.ends = np.zeros((nx, ny, 2, 6), dtype)  # the face weights of each row's end cells
-        # small levels run on one thread: a parallel launch costs more than the work there
+        # small levels run in one compiled call per visit (:mod:`.coarse_levels`)
         self.small = np.prod(self.shape) < SERIAL_CELLS
-        self.residual = residual_serial if self.small else residual
 
     def args(self):
         return (self.w[0], self.w[1], self.w[2], self.periodic, self.uniform, self.ends, self.coef)
@@ -535,8 +525,7 @@ class _Level:
 
     def smooth(self, x, b, sweeps, reverse):
         """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call)."""
-        kernel = gauss_seidel_serial if self.small else gauss_seidel
-        kernel(x, b, *self.args(), 1 if reverse else 0, 2 * sweeps)
+        gauss_seidel(x, b, *self.args(), 1 if reverse else 0, 2 * sweeps)
 
 
 class MultigridPoisson:
@@ -559,6 +548,14 @@ class MultigridPoisson:
             levels.append(_Level(coarse, coef, self.periodic, PRECONDITIONER_DTYPE))
         self.levels = levels
         self.coarse_sweeps = 2 * max(levels[-1].shape) + 4
+        # the small levels below the finest (the coarsest at least) run as one compiled
+        # call per visit; the finest stays in the row kernels, which hold less per cell
+        small = [n for n, lev in enumerate(levels) if lev.small and n > 0]
+        self.first_small = small[0] if small else len(levels) - 1
+        self.small = CoarseLevels(
+            levels[self.first_small :], self.periodic, self.first_small, W_LEVELS,
+            PRE_SWEEPS, self.coarse_sweeps, OMEGA,
+        )  # fmt: skip
         fine = levels[0]
         self.active = np.zeros(fine.shape, dtype=np.bool_)
         self.r = np.zeros(fine.shape)
@@ -583,6 +580,7 @@ class MultigridPoisson:
                 lev.w[a] *= lev.coef[a]
         for lev in self.levels:
             lev.classify_rows()
+        self.small.set_weights()
         self.active[...] = self._diag_positive(fine)  # cells with an open face
 
     @staticmethod
@@ -615,14 +613,13 @@ class MultigridPoisson:
     def _cycle(self, n: int):
         """Level n from its current guess: smooth, correct from level n + 1 (twice on the
         W_LEVELS, each time from the coarse guess so far), smooth in reverse order."""
-        lev = self.levels[n]
-        if n == len(self.levels) - 1:  # coarsest: many symmetric sweeps
-            lev.smooth(lev.x, lev.b, self.coarse_sweeps, reverse=False)
-            lev.smooth(lev.x, lev.b, self.coarse_sweeps, reverse=True)
+        if n == self.first_small:  # this level and those below: one compiled call
+            self.small.cycle()
             return
+        lev = self.levels[n]
         nxt = self.levels[n + 1]
         lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
-        lev.residual(lev.x, lev.b, *lev.args(), lev.r)
+        residual(lev.x, lev.b, *lev.args(), lev.r)
         restrict_mean(lev.r, lev.ratio, nxt.b)
         nxt.x[...] = 0.0
         for _ in range(2 if n in W_LEVELS else 1):
