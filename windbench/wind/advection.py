@@ -36,6 +36,10 @@ import numpy as np
 from numba import njit, prange
 
 ONE = np.uint64(1)  # index arithmetic on unsigned indices must stay unsigned
+# LLVM may contract a * b + c into one fused multiply-add and reorder sums in the
+# interpolation kernels (12-15% less time per face and per backtrace, one core); not the
+# no-NaN/no-infinity assumptions, so a NaN still propagates and is caught after the step
+FAST_MATH = {"contract", "reassoc", "nsz", "arcp"}
 
 
 @njit(cache=True, inline="always")
@@ -143,7 +147,7 @@ def _wrap(p, n, periodic):
     return p
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FAST_MATH)
 def backtrace(u, v, w, cells, periodic, dt_h, disp):
     """disp[c] = the RK2 backtrace displacement dt u(x_c - dt/2 u(x_c)) at every cell
     centre x_c, ghost cells included (padded index c + 1 per axis), in cells.
@@ -177,7 +181,7 @@ def backtrace(u, v, w, cells, periodic, dt_h, disp):
                 disp[ci, cj, ck, 2] = dt_h * wm
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FAST_MATH)
 def advect(q, a, disp, cells, periodic, out, qmin, qmax, bounds):
     """out = q(x - d) at every interior face of component a, d the mean of the backtrace
     displacements (:func:`backtrace`) of the two cells the face separates.

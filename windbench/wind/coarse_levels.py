@@ -188,7 +188,6 @@ class CoarseLevels:
         for lev, s, size in zip(levels, starts, sizes, strict=True):
             lev.x = self.x[s : s + size].reshape(lev.shape)
             lev.b = self.b[s : s + size].reshape(lev.shape)
-            lev.r = None  # the residual goes straight into the next level's b
         self.w = np.zeros((total, FACES), dtype)
         self.diag = np.zeros(total, dtype)
         self.inv = np.zeros(total, dtype)

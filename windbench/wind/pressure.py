@@ -163,7 +163,8 @@ def _ends(nz):
 
 @njit(cache=True)
 def _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, residual):
-    """out[i] = (b - A x)[i] if ``residual``, else (A x)[i] (b unread). The constant-stencil
+    """out = (b - A x)[i] if ``residual``, else (A x)[i] (b unread); ``out`` is a plane (a
+    view of the output's plane i, or scratch). The constant-stencil
     rows come in a loop of their own, with views taken without a condition (see
     :func:`_gs_plane`)."""
     sign = 1.0 if residual else -1.0
@@ -173,7 +174,7 @@ def _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, res
     for j in range(x.shape[1]):
         if not uniform[i, j]:
             continue
-        xc, bc, oc = x[i, j], b[i, j], out[i, j]
+        xc, bc, oc = x[i, j], b[i, j], out[j]
         am, ap, bm, bp = _inner_rows(x, i, j)
         for k in range(1, nz - 1):  # contiguous, no weight reads: vectorised
             s = c0 * (am[k] + ap[k]) + c1 * (bm[k] + bp[k]) + c2 * (xc[k - 1] + xc[k + 1])
@@ -183,7 +184,7 @@ def _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, res
     for j in range(x.shape[1]):
         if uniform[i, j]:
             continue
-        xc, bc, oc = x[i, j], b[i, j], out[i, j]
+        xc, bc, oc = x[i, j], b[i, j], out[j]
         xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
         wxm, wxp, wym, wyp, wzc = wx[i, j], wx[i + 1, j], wy[i, j], wy[i, j + 1], wz[i, j]
         for k in range(1, nz - 1):
@@ -207,7 +208,7 @@ def _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, periodic, i, j, residua
 def residual(x, b, wx, wy, wz, periodic, uniform, ends, coef, out):
     """out = b - A x."""
     for i in prange(x.shape[0]):
-        _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, True)
+        _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out[i], True)
 
 
 @njit(cache=True, parallel=True)
@@ -216,7 +217,7 @@ def apply_operator(x, wx, wy, wz, periodic, uniform, ends, coef, out):
     (plane by plane while the plane is in cache: one pass less per CG iteration)."""
     partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        _operator_plane(x, x, wx, wy, wz, periodic, uniform, ends, coef, i, out, False)
+        _operator_plane(x, x, wx, wy, wz, periodic, uniform, ends, coef, i, out[i], False)
         partial[i] = _plane_dot(x, out, i)
     return partial.sum()
 
@@ -340,21 +341,29 @@ def uniform_rows(wx, wy, wz, coef, out):
 
 
 @njit(cache=True, parallel=True)
-def restrict_mean(fine, ratio, coarse):
-    """coarse[I,J,K] = mean of the fine cells it covers (ratio 1 or 2 per axis)."""
+def residual_restrict(x, b, wx, wy, wz, periodic, uniform, ends, coef, ratio, coarse):
+    """coarse[I,J,K] = mean of the residual b - A x over the fine cells it covers (ratio 1
+    or 2 per axis). The residual of the fine planes under one coarse plane goes to a
+    scratch block and straight into the mean: it is never stored as a whole field (a
+    write and a read of a fine field less per cycle)."""
     n0, n1, n2 = coarse.shape
     r0, r1, r2 = ratio[0], ratio[1], ratio[2]
     inv = 1.0 / (r0 * r1 * r2)
     for I in prange(n0):
+        fine = np.empty((r0, x.shape[1], x.shape[2]), x.dtype)
+        for a in range(r0):
+            _operator_plane(
+                x, b, wx, wy, wz, periodic, uniform, ends, coef, r0 * I + a, fine[a], True
+            )
         for J in range(n1):
             coarse[I, J, :] = 0.0
             for a in range(r0):
-                for b in range(r1):
-                    i, j = r0 * I + a, r1 * J + b
+                for bb in range(r1):
+                    j = r1 * J + bb
                     for K in range(n2):
-                        acc = fine[i, j, r2 * K]
+                        acc = fine[a, j, r2 * K]
                         if r2 == 2:
-                            acc += fine[i, j, r2 * K + 1]
+                            acc += fine[a, j, r2 * K + 1]
                         coarse[I, J, K] += acc
             for K in range(n2):
                 coarse[I, J, K] *= inv
@@ -457,21 +466,6 @@ def cast_copy(src, dst):
                 dst[i, j, k] = src[i, j, k]
 
 
-@njit(cache=True, parallel=True)
-def cast_dot(src, dst, r):
-    """dst = src converted to dst's dtype; returns r . dst, summed as :func:`dot` does (the
-    same bits), in the same pass."""
-    partial = np.empty(src.shape[0])
-    for i in prange(src.shape[0]):
-        acc = 0.0
-        for j in range(src.shape[1]):
-            for k in range(src.shape[2]):
-                dst[i, j, k] = src[i, j, k]
-                acc += r[i, j, k] * dst[i, j, k]
-        partial[i] = acc
-    return partial.sum()
-
-
 @njit(cache=True)
 def remove_mean(x, active):
     """x -= mean of x over active cells (the constant null space of pure-Neumann A)."""
@@ -507,7 +501,6 @@ class _Level:
         ]
         self.x = np.zeros(self.shape, dtype)
         self.b = np.zeros(self.shape, dtype)
-        self.r = np.zeros(self.shape, dtype)
         self.ratio = np.ones(3, dtype=np.int64)  # to the next coarser level
         self.uniform = np.zeros((nx, ny), dtype=np.bool_)  # see classify_rows
         self.ends = np.zeros((nx, ny, 2, 6), dtype)  # the face weights of each row's end cells
@@ -559,7 +552,7 @@ class MultigridPoisson:
         fine = levels[0]
         self.active = np.zeros(fine.shape, dtype=np.bool_)
         self.r = np.zeros(fine.shape)
-        self.z = np.zeros(fine.shape)
+        self.z = np.zeros(fine.shape) if singular else None  # M r with the constant removed
         self.p = np.zeros(fine.shape)
         self.q = np.zeros(fine.shape)
 
@@ -596,19 +589,24 @@ class MultigridPoisson:
         """z = M r: one symmetric multigrid cycle from a zero guess (V-shaped, W-shaped
         on the levels of W_LEVELS), in PRECONDITIONER_DTYPE; returns r . z."""
         cast_copy(r, self.levels[0].b)
-        return self._precondition(r, z)
+        rz, mr = self._precondition(r)
+        cast_copy(mr, z)
+        return rz
 
-    def _precondition(self, r, z) -> float:
-        """z = M r with r already in the finest level's b (:func:`cg_update` puts it
-        there); returns r . z (fused with the conversion of z unless A is singular)."""
+    def _precondition(self, r):
+        """(r . M r, M r) with r already in the finest level's b (:func:`cg_update` puts
+        it there). M r is the finest level's x itself (float32; the float64 kernels that
+        read it convert each value as a float64 copy would hold it, so the same bits and
+        two passes over a float64 field less per iteration), or, when A is singular, a
+        float64 copy with the constant removed."""
         fine = self.levels[0]
         fine.x[...] = 0.0
         self._cycle(0)
         if not self.singular:
-            return cast_dot(fine.x, z, r)
-        cast_copy(fine.x, z)
-        remove_mean(z, self.active)
-        return dot(r, z)
+            return dot(r, fine.x), fine.x
+        cast_copy(fine.x, self.z)
+        remove_mean(self.z, self.active)
+        return dot(r, self.z), self.z
 
     def _cycle(self, n: int):
         """Level n from its current guess: smooth, correct from level n + 1 (twice on the
@@ -619,8 +617,7 @@ class MultigridPoisson:
         lev = self.levels[n]
         nxt = self.levels[n + 1]
         lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
-        residual(lev.x, lev.b, *lev.args(), lev.r)
-        restrict_mean(lev.r, lev.ratio, nxt.b)
+        residual_restrict(lev.x, lev.b, *lev.args(), lev.ratio, nxt.b)
         nxt.x[...] = 0.0
         for _ in range(2 if n in W_LEVELS else 1):
             self._cycle(n + 1)
@@ -634,7 +631,7 @@ class MultigridPoisson:
             remove_mean(b, self.active)
             remove_mean(x, self.active)
         bnorm = np.sqrt(dot(b, b))
-        r, z, p, q = self.r, self.z, self.p, self.q
+        r, p, q = self.r, self.p, self.q
         residual(x, b, *fine.args(), r)
         rnorm = np.sqrt(dot(r, r))
         if bnorm == 0.0 or bnorm <= atol:
@@ -642,8 +639,9 @@ class MultigridPoisson:
             return 0, 0.0
         if rnorm <= tol * bnorm:
             return 0, rnorm / bnorm
-        rz = self.vcycle(r, z)
-        p[...] = z
+        cast_copy(r, fine.b)
+        rz, z = self._precondition(r)
+        cast_copy(z, p)
         it = 0
         while it < max_iterations:
             it += 1
@@ -651,7 +649,7 @@ class MultigridPoisson:
             rnorm = np.sqrt(cg_update(alpha, p, q, x, r, fine.b))
             if rnorm <= tol * bnorm:
                 break
-            rz_new = self._precondition(r, z)
+            rz_new, z = self._precondition(r)
             xpby(z, rz_new / rz, p)
             rz = rz_new
         return it, rnorm / bnorm
