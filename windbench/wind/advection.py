@@ -35,11 +35,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from windbench.wind.flags import FAST_MATH
+
 ONE = np.uint64(1)  # index arithmetic on unsigned indices must stay unsigned
-# LLVM may contract a * b + c into one fused multiply-add and reorder sums in the
-# interpolation kernels (12-15% less time per face and per backtrace, one core); not the
-# no-NaN/no-infinity assumptions, so a NaN still propagates and is caught after the step
-FAST_MATH = {"contract", "reassoc", "nsz", "arcp"}
 
 
 @njit(cache=True, inline="always")

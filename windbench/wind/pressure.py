@@ -55,6 +55,7 @@ import numpy as np
 from numba import njit, prange
 
 from windbench.wind.coarse_levels import CoarseLevels
+from windbench.wind.flags import FAST_MATH
 
 SERIAL_CELLS = 32768  # levels with fewer cells run on one thread (:mod:`.coarse_levels`)
 PRE_SWEEPS = 2  # per level and direction
@@ -222,7 +223,7 @@ def apply_operator(x, wx, wy, wz, periodic, uniform, ends, coef, out):
     return partial.sum()
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST_MATH)
 def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
     """One colour of plane i. Cells of one colour do not neighbour each other, so the
     order within a colour does not matter: each row's inner cells first, then its two end
@@ -297,7 +298,7 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, periodic, ends, i, j, first):
                 xc[k] += OMEGA * ((bc[k] + s) / d - xc[k])
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FAST_MATH)
 def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour, halves):
     """``halves`` half sweeps of red-black SOR (``OMEGA``) on A x = b, alternating colours
     from ``colour`` (cells with (i+j+k) % 2 == colour first), planes in parallel: a

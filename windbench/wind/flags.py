@@ -1,0 +1,9 @@
+"""Compiler flags shared by the numba kernels of the wind backends."""
+
+from __future__ import annotations
+
+# LLVM may contract a * b + c into one fused multiply-add and reorder sums (measured, one
+# core, A/B in one process: 12-15% less time per advected face and per backtrace, about 5%
+# per smoothing sweep of the pressure multigrid). Not the no-NaN/no-infinity assumptions,
+# so a NaN still propagates and the run stops after the step with the reason.
+FAST_MATH = {"contract", "reassoc", "nsz", "arcp"}
