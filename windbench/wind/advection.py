@@ -50,6 +50,14 @@ def _locate(f, npad):
 
 
 @njit(cache=True, inline="always")
+def _locate_inside(f, npad):
+    """:func:`_locate` for a coordinate already on the lattice (0 <= f <= npad - 1), as
+    after :func:`_keep_inside`: without the clamp, the same numbers."""
+    i0 = min(int(f), npad - 2)
+    return np.uint64(i0), f - i0
+
+
+@njit(cache=True, inline="always")
 def _trilinear(q, i, j, k, fx, fy, fz):
     """q trilinearly interpolated in the lattice cell (i, j, k) at weights (fx, fy, fz).
     The indices are unsigned (:func:`_locate`), so numba leaves out its wrap-around test
@@ -210,7 +218,10 @@ def advect(q, a, disp, cells, periodic, out, qmin, qmax, bounds):
                 bx = _keep_inside(x - dx, n0, p0) - s0
                 by = _keep_inside(y - dy, n1, p1) - s1
                 bz = _keep_inside(z - dz, n2, p2) - s2
-                out[I, J, K] = interp(q, bx, by, bz)
+                i, fx = _locate_inside(bx, P0)  # bx, by, bz are on the lattice
+                j, fy = _locate_inside(by, P1)
+                k, fz = _locate_inside(bz, P2)
+                out[I, J, K] = _trilinear(q, i, j, k, fx, fy, fz)
                 if bounds:
                     lo, hi = _bounds(q, bx, by, bz)
                     qmin[I, J, K] = lo
