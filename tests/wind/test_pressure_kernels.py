@@ -14,9 +14,9 @@ from windbench.wind.pressure import _Level
 SHAPE = (10, 8, 12)
 
 
-def _level(rng, periodic=(False, False, False)) -> _Level:
+def _level(rng, periodic=(False, False, False), omega=pressure.OMEGA) -> _Level:
     """A level with open faces except a closed block (a body) and closed domain walls."""
-    lev = _Level(SHAPE, np.ones(3), np.array(periodic))
+    lev = _Level(SHAPE, np.ones(3), np.array(periodic), omega=omega)
     for a in range(3):
         lev.w[a][...] = 1.0
         if not periodic[a]:
@@ -63,11 +63,13 @@ def test_uniform_rows_are_exactly_the_all_open_interior_rows():
     np.testing.assert_array_equal(lev.uniform, expected)
 
 
-def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells():
-    """A red half sweep moves each red cell by OMEGA towards (b + sum w x_nb) / diag, with
-    black neighbours unchanged; one call of four half sweeps gives the numbers of four calls."""
+@pytest.mark.parametrize("omega", [pressure.FINE_OMEGA, pressure.OMEGA, 1.3])
+def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega):
+    """A red half sweep moves each red cell by omega towards (b + sum w x_nb) / diag, with
+    black neighbours unchanged (Gauss-Seidel's and SOR's loops); one call of four half
+    sweeps gives the numbers of four calls."""
     rng = np.random.default_rng(2)
-    lev = _level(rng)
+    lev = _level(rng, omega=omega)
     x0, b = rng.random(SHAPE), rng.random(SHAPE)
     x = x0.copy()
     pressure.gauss_seidel(x, b, *lev.args(), 0, 1)  # one red half sweep
@@ -77,7 +79,7 @@ def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells():
     red = (np.indices(SHAPE).sum(axis=0) % 2) == 0
     nb_sum = diag * x0 - _operator_numpy(x0, lev.w, (False,) * 3)
     solved = (b + nb_sum) / np.where(diag > 0, diag, 1.0)
-    expected = np.where(red & (diag > 0), x0 + pressure.OMEGA * (solved - x0), x0)
+    expected = np.where(red & (diag > 0), x0 + omega * (solved - x0), x0)
     np.testing.assert_allclose(x, expected, rtol=1e-13, atol=1e-13)
     single, multi = x0.copy(), x0.copy()
     for colour in (1, 0, 1, 0):

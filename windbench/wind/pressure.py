@@ -19,7 +19,7 @@ coarse face weight = mean of the fine face weights it covers, operator re-discre
 with the coarse spacing (coefficient (h/H)^2 per axis); restriction = mean of the
 children, prolongation = injection (the transpose up to the factor 8), red-black
 successive over-relaxation smoothing, x_c += OMEGA ((b_c + sum_f w_f x_nb) / diag - x_c)
-with OMEGA = 1 (two sweeps down, the same in reverse order up, so the cycle is a
+with OMEGA = 1.1 on the coarse levels and 1 on the finest (two sweeps down, the same in reverse order up, so the cycle is a
 symmetric positive definite preconditioner as CG needs, for any 0 < OMEGA < 2). The
 coarsest level gets many symmetric sweeps. The first two coarse levels correct twice from
 the next level (a W there, ``W_LEVELS``), the others once (a V): 5.0 / 5.4 / 5.9
@@ -66,10 +66,15 @@ PRE_SWEEPS = 2  # per level and direction
 # 5.8 / 6.3 / 7.0 iterations); (1,) alone saved no iteration at 64^3 and 128^3, (1, 2, 3)
 # no more time.
 W_LEVELS = (1, 2)
-# Over-relaxation of the smoother. 1.15 saves one iteration at 32^3 and 64^3 (5 and 6 to
-# 1e-6 on the fence) but not at 128^3 (7): the iteration ratio 128^3 / 32^3 then rises
-# from 7/6 = 1.17 to 1.4, over the 1.3 that marks a resolution-independent solver.
-OMEGA = 1.0
+# Over-relaxation of the smoother on the coarse levels (OMEGA) and on the finest one
+# (FINE_OMEGA), where most of the smoothing time goes and where Gauss-Seidel's loop (x_c
+# not read) is a third faster than SOR's. Over 8 steps of the fence, A/B in one process:
+# MGPCG iterations per step to 1e-6 at 32^3 / 64^3 / 128^3: 5.0 / 5.0 / 5.75 with 1.0
+# everywhere, 4.8 / 5.0 / 5.0 with 1.1 everywhere (slower per iteration), 5.0 / 5.0 / 5.12
+# with 1.1 on the coarse levels only. (With the plain V-cycle, 1.15 had saved one
+# iteration at 32^3 and 64^3 but none at 128^3.)
+OMEGA = 1.1
+FINE_OMEGA = 1.0
 # The multigrid cycle (the preconditioner) works in single precision: it only has to
 # approximate A^-1; CG's vectors, residual and stopping test stay in double precision, so
 # the pressure still meets the relative residual tolerance in float64. Half the bytes per
@@ -226,18 +231,35 @@ def apply_operator(x, wx, wy, wz, periodic, uniform, ends, coef, out):
 @njit(cache=True, fastmath=FAST_MATH)
 def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
     """One colour of plane i. Cells of one colour do not neighbour each other, so the
-    order within a colour does not matter: each row's inner cells first, then its two end
-    cells. The stores are written out in the loops: an inlined helper that stores into an
-    array made the loop three to four times slower (numba 0.68)."""
+    order within a colour does not matter: the constant-stencil rows first, in a function
+    of their own (with the other rows' code in the same loop they ran twice as slow), then
+    the other rows. The stores are written out in the loops: an inlined helper that stores
+    into an array made the loop three to four times slower (numba 0.68)."""
+    # all open, one coefficient: the fewest flops
+    fast = coef[0] == coef[1] and coef[1] == coef[2]
+    if fast and coef[6] == 1.0:
+        _constant_rows_gauss_seidel(x, b, periodic, uniform, ends, coef, i, colour)
+    elif fast:
+        _constant_rows_sor(x, b, periodic, uniform, ends, coef, i, colour)
+    zero = np.zeros(x.shape[2], x.dtype)
+    for j in range(x.shape[1]):  # the other rows
+        if fast and uniform[i, j]:
+            continue
+        first = (i + j + colour) % 2
+        _gs_row(x, b, wx, wy, wz, periodic, uniform, coef, zero, i, j, first)
+        xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
+        _gs_row_ends(x[i, j], b[i, j], xm, xp, ym, yp, periodic, ends, i, j, first, coef[6])
+
+
+@njit(cache=True, fastmath=FAST_MATH)
+def _constant_rows_gauss_seidel(x, b, periodic, uniform, ends, coef, i, colour):
+    """One colour of the all-open rows of plane i, omega = 1: x_c = (b_c + sum x_nb) / diag
+    as gain b_c + gain c0 sum x_nb (coef[3], coef[4], in x's precision: float32 arithmetic
+    throughout is a third faster than converting each value to float64 and back)."""
     nz = x.shape[2]
-    # x_c <- (1 - OMEGA) x_c + OMEGA (b_c + s) / diag, diag = 2 (c0 + c1 + c2); gain and
-    # gain c0 come in x's precision (coef[3], coef[4]): float32 arithmetic throughout is
-    # a third faster than converting each value to float64 and back (measured, one core)
     gain, g = coef[3], coef[4]
-    # all open, Gauss-Seidel, one coefficient: the fewest flops
-    fast = coef[0] == coef[1] and coef[1] == coef[2] and OMEGA == 1.0
-    for j in range(x.shape[1]):  # the constant-stencil rows, in a loop of their own:
-        if not (fast and uniform[i, j]):  # with the other rows' code in it, twice as slow
+    for j in range(x.shape[1]):
+        if not uniform[i, j]:
             continue
         first = (i + j + colour) % 2  # the first k of this colour in row (i, j)
         # inner k = 2 - first, 4 - first, ... < nz - 1, counted: a stepped range with
@@ -251,23 +273,35 @@ def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
             k = 2 - first + 2 * m
             nb = am[k] + ap[k] + bm[k] + bp[k] + xc[k - 1] + xc[k + 1]
             xc[k] = gain * bc[k] + g * nb
-        _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first)
-    zero = np.zeros(nz, x.dtype)
-    for j in range(x.shape[1]):  # the other rows
-        if fast and uniform[i, j]:
+        _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first, coef[6])
+
+
+@njit(cache=True, fastmath=FAST_MATH)
+def _constant_rows_sor(x, b, periodic, uniform, ends, coef, i, colour):
+    """:func:`_constant_rows_gauss_seidel` with over-relaxation: x_c = (1 - omega) x_c +
+    omega (b_c + sum x_nb) / diag, (1 - omega) in coef[5]."""
+    nz = x.shape[2]
+    gain, g, keep = coef[3], coef[4], coef[5]
+    for j in range(x.shape[1]):
+        if not uniform[i, j]:
             continue
         first = (i + j + colour) % 2
-        _gs_row(x, b, wx, wy, wz, periodic, uniform, coef, zero, i, j, first)
-        xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
-        _gs_row_ends(x[i, j], b[i, j], xm, xp, ym, yp, periodic, ends, i, j, first)
+        count = (nz - 2 + first) // 2
+        xc, bc = x[i, j], b[i, j]
+        am, ap, bm, bp = _inner_rows(x, i, j)
+        for m in range(count):
+            k = 2 - first + 2 * m
+            nb = am[k] + ap[k] + bm[k] + bp[k] + xc[k - 1] + xc[k + 1]
+            xc[k] = keep * xc[k] + gain * bc[k] + g * nb
+        _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first, coef[6])
 
 
 @njit(cache=True, inline="always")
 def _gs_row(x, b, wx, wy, wz, periodic, uniform, coef, zero, i, j, first):
     """The inner cells of colour ``first`` in row (i, j) (see :func:`_gs_plane`), for rows
-    with a closed face or anisotropic coefficients, or with OMEGA != 1."""
+    with a closed face or anisotropic coefficients."""
     c0, c1, c2 = coef[0], coef[1], coef[2]
-    keep, gain = 1.0 - OMEGA, coef[3]
+    gain, keep, omega = coef[3], coef[5], coef[6]
     count = (x.shape[2] - 2 + first) // 2
     xc, bc = x[i, j], b[i, j]
     xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
@@ -282,11 +316,11 @@ def _gs_row(x, b, wx, wy, wz, periodic, uniform, coef, zero, i, j, first):
             k = 2 - first + 2 * m
             s, d = _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wzc, k)
             if d > 0.0:  # (a cell without an open face is left alone)
-                xc[k] += OMEGA * ((bc[k] + s) / d - xc[k])
+                xc[k] += omega * ((bc[k] + s) / d - xc[k])
 
 
 @njit(cache=True, inline="always")
-def _gs_row_ends(xc, bc, xm, xp, ym, yp, periodic, ends, i, j, first):
+def _gs_row_ends(xc, bc, xm, xp, ym, yp, periodic, ends, i, j, first, omega):
     """The end cells k = 0 and nz - 1 of row (i, j) if they have colour ``first``, from
     the views of the row and its neighbours."""
     nz = xc.shape[0]
@@ -295,7 +329,7 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, periodic, ends, i, j, first):
         if k % 2 == first:
             s, d = _end_sum(xc, xm, xp, ym, yp, ends, periodic, i, j, side)
             if d > 0.0:  # (a cell without an open face is left alone)
-                xc[k] += OMEGA * ((bc[k] + s) / d - xc[k])
+                xc[k] += omega * ((bc[k] + s) / d - xc[k])
 
 
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)
@@ -487,12 +521,13 @@ def remove_mean(x, active):
 class _Level:
     """One multigrid level: face weights, coefficient per axis, work arrays."""
 
-    def __init__(self, shape, coef, periodic, dtype=np.float64):
+    def __init__(self, shape, coef, periodic, dtype=np.float64, omega=OMEGA):
         self.shape = tuple(int(n) for n in shape)
         c = np.asarray(coef, dtype=np.float64)
-        gain = OMEGA * 0.5 / c.sum()  # the smoother's factor 1 / diag on all-open rows
-        # (h/H)^2 per axis, then the smoother's gain and gain c0, in the level's precision
-        self.coef = np.array([c[0], c[1], c[2], gain, gain * c[0]], dtype=dtype)
+        gain = omega * 0.5 / c.sum()  # the smoother's factor omega / diag on all-open rows
+        # (h/H)^2 per axis, then the smoother's gain, gain c0, 1 - omega and omega, in the
+        # level's precision
+        self.coef = np.array([c[0], c[1], c[2], gain, gain * c[0], 1.0 - omega, omega], dtype=dtype)
         self.periodic = periodic
         nx, ny, nz = self.shape
         self.w = [
@@ -528,7 +563,7 @@ class MultigridPoisson:
     def __init__(self, shape, periodic, singular: bool, min_coarse: int = 4):
         self.periodic = np.asarray(periodic, dtype=np.bool_)
         self.singular = singular
-        levels = [_Level(shape, np.ones(3), self.periodic, PRECONDITIONER_DTYPE)]
+        levels = [_Level(shape, np.ones(3), self.periodic, PRECONDITIONER_DTYPE, FINE_OMEGA)]
         while True:
             cur = levels[-1]
             ratio = np.array(
