@@ -18,13 +18,14 @@ Multigrid: cell-centred, axes with an even number (>= 4) of cells halved per lev
 coarse face weight = mean of the fine face weights it covers, operator re-discretised
 with the coarse spacing (coefficient (h/H)^2 per axis); restriction = mean of the
 children, prolongation = injection (the transpose up to the factor 8), red-black
-successive over-relaxation smoothing, x_c += OMEGA ((b_c + sum_f w_f x_nb) / diag - x_c)
-with OMEGA = 1.1 on the coarse levels and 1 on the finest (two sweeps down, the same in reverse order up, so the cycle is a
-symmetric positive definite preconditioner as CG needs, for any 0 < OMEGA < 2). The
-coarsest level gets many symmetric sweeps. The first two coarse levels correct twice from
-the next level (a W there, ``W_LEVELS``), the others once (a V): 5.0 / 5.4 / 5.9
-iterations per step at 32^3 / 64^3 / 128^3 on the fence (mean over 30 steps). The whole
-cycle runs in single precision (``PRECONDITIONER_DTYPE``) while CG stays in double: the
+successive over-relaxation smoothing, x_c += omega ((b_c + sum_f w_f x_nb) / diag - x_c)
+with omega = ``OMEGA`` = 1.1 on the coarse levels and ``FINE_OMEGA`` = 1 (Gauss-Seidel) on
+the finest (two sweeps down, the same in reverse order up, so the cycle is a symmetric
+positive definite preconditioner as CG needs, for any 0 < omega < 2). The coarsest level
+gets many symmetric sweeps. The first two coarse levels correct twice from the next level
+(a W there, ``W_LEVELS``), the others once (a V): 5.00 / 5.00 / 5.07 iterations per step
+at 32^3 / 64^3 / 128^3 on the fence (mean over 29 steps of ``experiment=scaling``). The
+whole cycle runs in single precision (``PRECONDITIONER_DTYPE``) while CG stays in double: the
 same iteration counts and a pressure within 1e-8 (relative) of an all-float64 solve, in
 15% less time at 128^3 on one core (A/B in one process; tested: it still reaches a
 relative residual of 1e-10).
