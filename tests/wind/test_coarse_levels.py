@@ -35,15 +35,14 @@ def _two_levels(rng, periodic):
     coarse.w = _weights(rng, coarse.shape, periodic)
     small = CoarseLevels([fine, coarse], np.array(periodic), 0, (), 1, 3, pressure.OMEGA)
     small.set_weights()
-    return fine, coarse, small
+    x, b = rng.random(SHAPE), rng.random(SHAPE)  # a guess and a right-hand side
+    fine.x[...], fine.b[...] = x, b
+    return fine, coarse, small, x, b
 
 
 @pytest.mark.parametrize("periodic", [(False, False, False), (True, False, True)])
 def test_a_red_half_sweep_solves_each_red_open_cell_for_its_neighbours(periodic):
-    rng = np.random.default_rng(0)
-    fine, _, small = _two_levels(rng, periodic)
-    x0, b = rng.random(SHAPE), rng.random(SHAPE)
-    fine.x[...], fine.b[...] = x0, b
+    fine, _, small, x0, b = _two_levels(np.random.default_rng(0), periodic)
     start, split, _ = small.ranges[0]
     coarse_levels.half_sweep(
         small.x, small.b, small.nb, small.w, small.inv, small.order[start:split], pressure.OMEGA
@@ -62,9 +61,7 @@ def test_a_red_half_sweep_solves_each_red_open_cell_for_its_neighbours(periodic)
 @pytest.mark.parametrize("periodic", [(False, False, False), (True, True, False)])
 def test_the_restricted_residual_is_the_mean_of_the_childrens_residuals(periodic):
     rng = np.random.default_rng(1)
-    fine, coarse, small = _two_levels(rng, periodic)
-    x, b = rng.random(SHAPE), rng.random(SHAPE)
-    fine.x[...], fine.b[...] = x, b
+    fine, coarse, small, x, b = _two_levels(rng, periodic)
     coarse.x[...] = 7.0  # the coarse cycle starts from zero
     (first, count), (cfirst, ccount) = small.blocks
     coarse_levels.residual_restrict(

@@ -252,49 +252,48 @@ def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
         _gs_row_ends(x[i, j], b[i, j], xm, xp, ym, yp, periodic, ends, i, j, first, coef[6])
 
 
+@njit(cache=True, inline="always")
+def _constant_row(x, b, i, j, colour):
+    """Row (i, j) for the all-open smoother loops: the first k of this colour, how many
+    inner cells of it (k = 2 - first, 4 - first, ... < nz - 1: counted, since a stepped
+    range with run-time bounds compiles to a loop almost twice as slow), and views of the
+    row, of b and of the neighbour rows taken without a condition (views chosen by one,
+    :func:`_neighbour_rows`, made the loop about twice as slow)."""
+    first = (i + j + colour) % 2
+    count = (x.shape[2] - 2 + first) // 2
+    return first, count, x[i, j], b[i, j], _inner_rows(x, i, j)
+
+
 @njit(cache=True, fastmath=FAST_MATH)
 def _constant_rows_gauss_seidel(x, b, periodic, uniform, ends, coef, i, colour):
     """One colour of the all-open rows of plane i, omega = 1: x_c = (b_c + sum x_nb) / diag
     as gain b_c + gain c0 sum x_nb (coef[3], coef[4], in x's precision: float32 arithmetic
     throughout is a third faster than converting each value to float64 and back)."""
-    nz = x.shape[2]
     gain, g = coef[3], coef[4]
     for j in range(x.shape[1]):
-        if not uniform[i, j]:
-            continue
-        first = (i + j + colour) % 2  # the first k of this colour in row (i, j)
-        # inner k = 2 - first, 4 - first, ... < nz - 1, counted: a stepped range with
-        # run-time bounds compiles to a loop almost twice as slow
-        count = (nz - 2 + first) // 2
-        # views without a condition: views chosen by one (:func:`_neighbour_rows`) made
-        # this loop about twice as slow
-        xc, bc = x[i, j], b[i, j]
-        am, ap, bm, bp = _inner_rows(x, i, j)
-        for m in range(count):
-            k = 2 - first + 2 * m
-            nb = am[k] + ap[k] + bm[k] + bp[k] + xc[k - 1] + xc[k + 1]
-            xc[k] = gain * bc[k] + g * nb
-        _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first, coef[6])
+        if uniform[i, j]:
+            first, count, xc, bc, (am, ap, bm, bp) = _constant_row(x, b, i, j, colour)
+            for m in range(count):
+                k = 2 - first + 2 * m
+                nb = am[k] + ap[k] + bm[k] + bp[k] + xc[k - 1] + xc[k + 1]
+                xc[k] = gain * bc[k] + g * nb
+            _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first, coef[6])
 
 
 @njit(cache=True, fastmath=FAST_MATH)
 def _constant_rows_sor(x, b, periodic, uniform, ends, coef, i, colour):
     """:func:`_constant_rows_gauss_seidel` with over-relaxation: x_c = (1 - omega) x_c +
-    omega (b_c + sum x_nb) / diag, (1 - omega) in coef[5]."""
-    nz = x.shape[2]
+    omega (b_c + sum x_nb) / diag, 1 - omega in coef[5] (a loop of its own: reading x_c
+    makes it a third slower than Gauss-Seidel's)."""
     gain, g, keep = coef[3], coef[4], coef[5]
     for j in range(x.shape[1]):
-        if not uniform[i, j]:
-            continue
-        first = (i + j + colour) % 2
-        count = (nz - 2 + first) // 2
-        xc, bc = x[i, j], b[i, j]
-        am, ap, bm, bp = _inner_rows(x, i, j)
-        for m in range(count):
-            k = 2 - first + 2 * m
-            nb = am[k] + ap[k] + bm[k] + bp[k] + xc[k - 1] + xc[k + 1]
-            xc[k] = keep * xc[k] + gain * bc[k] + g * nb
-        _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first, coef[6])
+        if uniform[i, j]:
+            first, count, xc, bc, (am, ap, bm, bp) = _constant_row(x, b, i, j, colour)
+            for m in range(count):
+                k = 2 - first + 2 * m
+                nb = am[k] + ap[k] + bm[k] + bp[k] + xc[k - 1] + xc[k + 1]
+                xc[k] = keep * xc[k] + gain * bc[k] + g * nb
+            _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first, coef[6])
 
 
 @njit(cache=True, inline="always")
