@@ -180,7 +180,7 @@ class CoarseLevels:
         )
         self.parent = np.full(total, total, dtype=np.int32)  # the coarsest: no parent
         self.mean = np.ones(len(levels), dtype)
-        for n, (lev, nxt) in enumerate(zip(levels[:-1], levels[1:], strict=False)):
+        for n, (lev, nxt) in enumerate(zip(levels[:-1], levels[1:], strict=True)):
             idx = np.indices(lev.shape).reshape(3, -1) // lev.ratio[:, None]
             coarse = np.ravel_multi_index(tuple(idx), nxt.shape)
             self.parent[starts[n] : starts[n] + sizes[n]] = starts[n + 1] + coarse
@@ -193,8 +193,8 @@ class CoarseLevels:
         self.inv = np.zeros(total, dtype)
         self.order = np.zeros(total, dtype=np.int32)
         self.ranges = np.zeros((len(levels), 3), dtype=np.int64)
-        self.colour = np.concatenate(
-            [np.indices(lev.shape).sum(axis=0).reshape(-1) % 2 for lev in levels]
+        self.colour = np.concatenate(  # (i + j + k) % 2 of every cell
+            [(np.indices(lev.shape).sum(axis=0).reshape(-1) % 2).astype(np.int8) for lev in levels]
         )
         self.ops = schedule(first, first + len(levels) - 1, w_levels)
         self.sweeps = np.array([pre_sweeps, coarse_sweeps], dtype=np.int64)
@@ -211,7 +211,7 @@ class CoarseLevels:
             diag = table.sum(axis=1, dtype=table.dtype)
             self.diag[s : s + size] = diag
             self.inv[s : s + size] = np.where(diag > 0, 1.0 / np.where(diag > 0, diag, 1), 0)
-            colour = np.indices(lev.shape).sum(axis=0).reshape(-1) % 2
+            colour = self.colour[s : s + size]
             red = s + np.flatnonzero((diag > 0) & (colour == 0))
             black = s + np.flatnonzero((diag > 0) & (colour == 1))
             self.order[filled : filled + red.size] = red
