@@ -74,15 +74,6 @@ def _trilinear(q, i, j, k, fx, fy, fz):
 
 
 @njit(cache=True, inline="always")
-def interp(q, fx, fy, fz):
-    """q trilinearly interpolated at lattice coordinates (fx, fy, fz) of its padded array."""
-    i, wx = _locate(fx, q.shape[0])
-    j, wy = _locate(fy, q.shape[1])
-    k, wz = _locate(fz, q.shape[2])
-    return _trilinear(q, i, j, k, wx, wy, wz)
-
-
-@njit(cache=True, inline="always")
 def _bounds(q, fx, fy, fz):
     """(min, max) of the eight lattice values around lattice coordinates (fx, fy, fz)."""
     i, _ = _locate(fx, q.shape[0])
