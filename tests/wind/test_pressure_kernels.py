@@ -33,7 +33,7 @@ def _level(rng, periodic=(False, False, False), omega=pressure.OMEGA) -> _Level:
 def test_operator_and_residual_match_the_stencil_written_out(periodic):
     rng = np.random.default_rng(0)
     lev = _level(rng, periodic)
-    assert 0 < lev.uniform.mean() < 1  # both paths are exercised
+    assert set(np.unique(lev.rows)) == {0, 1, 2}  # every row class is exercised
     x, b = rng.random(SHAPE), rng.random(SHAPE)
     expected = _operator_numpy(x, lev.w, periodic)
     out = np.empty(SHAPE)
@@ -44,32 +44,52 @@ def test_operator_and_residual_match_the_stencil_written_out(periodic):
     np.testing.assert_allclose(out, b - expected, rtol=1e-13, atol=1e-13)
 
 
-def test_uniform_rows_are_exactly_the_all_open_interior_rows():
-    lev = _level(np.random.default_rng(1))
+@pytest.mark.parametrize("periodic", [(False, False, False), (True, False, True)])
+def test_row_classes_follow_the_face_weights(periodic):
+    """ALL_OPEN: an interior row whose inner cells have every face open; ROW_CONSTANT: each
+    of the inner cells' six face weights the same along the row (the rows at the domain
+    faces, the fractional patch's neighbours); GENERAL: the rest."""
+    lev = _level(np.random.default_rng(1), periodic)
     w0, w1, w2 = lev.w
     inner = slice(1, SHAPE[2] - 1)
-    expected = np.zeros(SHAPE[:2], bool)
-    for i in range(1, SHAPE[0] - 1):
-        for j in range(1, SHAPE[1] - 1):
-            faces = (
-                w0[i, j, inner],
-                w0[i + 1, j, inner],
-                w1[i, j, inner],
-                w1[i, j + 1, inner],
-                w2[i, j, 1 : SHAPE[2] - 1],
-                w2[i, j, 2 : SHAPE[2]],
+    expected = np.zeros(SHAPE[:2], int)
+    for i in range(SHAPE[0]):
+        for j in range(SHAPE[1]):
+            faces = np.array(
+                [
+                    w0[i, j, inner],
+                    w0[i + 1, j, inner],
+                    w1[i, j, inner],
+                    w1[i, j + 1, inner],
+                    w2[i, j, 1 : SHAPE[2] - 1],
+                    w2[i, j, 2 : SHAPE[2]],
+                ]
             )
-            expected[i, j] = all(np.all(f == 1.0) for f in faces)
-    np.testing.assert_array_equal(lev.uniform, expected)
+            interior = 0 < i < SHAPE[0] - 1 and 0 < j < SHAPE[1] - 1
+            if not np.all(faces == faces[:, :1]) or not np.all(faces[4] == faces[5]):
+                expected[i, j] = pressure.GENERAL
+            elif interior and np.all(faces == 1.0):
+                expected[i, j] = pressure.ALL_OPEN
+            else:
+                expected[i, j] = pressure.ROW_CONSTANT
+    np.testing.assert_array_equal(lev.rows, expected)
 
 
-@pytest.mark.parametrize("omega", [pressure.FINE_OMEGA, pressure.OMEGA, 1.3])
-def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega):
+@pytest.mark.parametrize(
+    "omega, periodic",
+    [
+        (pressure.FINE_OMEGA, (False, False, False)),
+        (pressure.OMEGA, (False, False, False)),
+        (1.3, (False, False, False)),
+        (pressure.FINE_OMEGA, (True, False, True)),
+    ],
+)
+def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega, periodic):
     """A red half sweep moves each red cell by omega towards (b + sum w x_nb) / diag, with
     black neighbours unchanged (Gauss-Seidel's and SOR's loops); one call of four half
     sweeps gives the numbers of four calls."""
     rng = np.random.default_rng(2)
-    lev = _level(rng, omega=omega)
+    lev = _level(rng, periodic, omega=omega)
     x0, b = rng.random(SHAPE), rng.random(SHAPE)
     x = x0.copy()
     pressure.gauss_seidel(x, b, *lev.args(), 0, 1)  # one red half sweep
@@ -77,7 +97,7 @@ def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega
         np.take(lev.w[a], np.arange(SHAPE[a]) + s, axis=a) for a in range(3) for s in (0, 1)
     )
     red = (np.indices(SHAPE).sum(axis=0) % 2) == 0
-    nb_sum = diag * x0 - _operator_numpy(x0, lev.w, (False,) * 3)
+    nb_sum = diag * x0 - _operator_numpy(x0, lev.w, periodic)
     solved = (b + nb_sum) / np.where(diag > 0, diag, 1.0)
     expected = np.where(red & (diag > 0), x0 + omega * (solved - x0), x0)
     np.testing.assert_allclose(x, expected, rtol=1e-13, atol=1e-13)

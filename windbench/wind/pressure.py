@@ -31,15 +31,20 @@ same iteration counts and a pressure within 1e-8 (relative) of an all-float64 so
 relative residual of 1e-10).
 
 Speed: the kernels work row by row along z. A row's x and y neighbour rows are found
-once, as views (wrapped on periodic axes, a zero row for the ghost beyond a wall), so each
-cell is plain contiguous reads. Rows whose cells have every face open (most of the air)
-are marked once per weight change (:func:`uniform_rows`) and use the constant 7-point
-stencil without reading any weight; the two end cells of every row take their weights
-from a compact table (:func:`end_weights`); the constant-stencil rows are done in a loop
-of their own with neighbour views taken without a condition, which made the smoother about
-1.3 times as fast as one loop over all rows (2.7 -> 2.05 ns per cell update at 64^3, one
-core, A/B). Stores are written out in the
-loops: numba made a loop with an inlined storing helper three to four times slower. The
+once, as views (wrapped on periodic axes; beyond a wall or an opening another row, with
+coefficient 0: the ghost x = 0), so each cell is plain contiguous reads. Each row is
+classified once per weight change (:func:`classify_rows`): ALL_OPEN rows (most of the
+air) use the constant 7-point stencil without reading any weight, ROW_CONSTANT rows (the
+rows along the domain faces, coarse rows of constant fractional weights) per-row
+coefficients, GENERAL rows (cut by a body or cloth) the face weights cell by cell; the two
+end cells of every row take their coefficients from a compact table. The classes run in
+loops of their own, the ALL_OPEN rows with neighbour views taken without a condition,
+which made the smoother about 1.3 times as fast as one loop over all rows (2.7 -> 2.05 ns
+per cell update at 64^3, one core, A/B); the ROW_CONSTANT class (the domain-face rows had
+gone through the weighted loop) took the projection from 29.4 to 25.3 ms at 64^3 (one
+core, minimum of 12 steps, A/B in one process; the operator gives the same bits). Stores
+are written out in the loops: numba made a loop with an inlined storing helper three to
+four times slower. The
 levels below ``SERIAL_CELLS`` cells run as one compiled call per visit on flat per-cell
 tables (:mod:`.coarse_levels`): there the calls and the per-row set-up, not the arithmetic,
 had cost the time (projection 11.3 -> 8.8 ms at 32^3, 31.7 -> 28.0 ms at 64^3, one core,
@@ -85,6 +90,12 @@ FINE_OMEGA = 1.0
 PRECONDITIONER_DTYPE = np.float32
 
 
+# Row classes (:func:`classify_rows`): the kernels treat each row (i, j, :) by its class.
+ALL_OPEN = 0  # interior row of an isotropic level, every face of its inner cells open
+ROW_CONSTANT = 1  # each of the inner cells' six face weights the same all along the row
+GENERAL = 2  # the rest: rows cut by a body or by cloth, rows without an open face
+
+
 @njit(cache=True, inline="always")
 def _cell_face_weights(wx, wy, wz, i, j, k):
     """The six face weights of cell (i, j, k): -x, +x, -y, +y, -z, +z."""
@@ -92,75 +103,61 @@ def _cell_face_weights(wx, wy, wz, i, j, k):
 
 
 @njit(cache=True, inline="always")
-def _axis_neighbours(i, n, periodic):
-    """Lower and upper neighbour of index i on an axis of n cells, each with a factor 1 when
-    it exists (inside, or wrapped on a periodic axis) and 0 when it is the ghost x = 0
-    (whose index is then i itself: a valid read, multiplied by 0). Used along z, for the
-    two end cells of a row (:func:`_end_sum`)."""
-    lower_in, upper_in = i > 0, i < n - 1
-    im = i - 1 if lower_in else (n - 1 if periodic else i)
-    ip = i + 1 if upper_in else (0 if periodic else i)
-    return im, 1.0 if lower_in or periodic else 0.0, ip, 1.0 if upper_in or periodic else 0.0
+def _row_neighbours(i, n, periodic):
+    """(lower, upper) index of the rows beside row i on an axis of n rows, and a factor
+    each, 1 where that neighbour exists (inside, or wrapped on a periodic axis) and 0 where
+    it is the ghost x = 0 beyond a wall or an opening. A ghost's index is another row of
+    the level (i + 1 or i - 1; i itself only when n == 1), read and multiplied by 0: the
+    views of x then never alias the row being updated, whose overlap check would send the
+    loop to its scalar version."""
+    lower_in, upper_in = i > 0 or periodic, i < n - 1 or periodic
+    im = (i - 1 if i > 0 else n - 1) if lower_in else min(i + 1, n - 1)
+    ip = (i + 1 if i < n - 1 else 0) if upper_in else max(i - 1, 0)
+    return im, 1.0 if lower_in else 0.0, ip, 1.0 if upper_in else 0.0
 
 
 @njit(cache=True, inline="always")
-def _neighbour_rows(x, periodic, zero, i, j):
-    """Views of the rows beside row (i, j, :) along x and y (-x, +x, -y, +y): wrapped on a
-    periodic axis, the zero row (the ghost x = 0) beyond a non-periodic one. Found once per
-    row, they make every cell's stencil plain contiguous reads: computed indices or
-    factors per cell cost two to three times as much."""
-    nx, ny = x.shape[0], x.shape[1]
-    xm = x[i - 1, j] if i > 0 else (x[nx - 1, j] if periodic[0] else zero)
-    xp = x[i + 1, j] if i < nx - 1 else (x[0, j] if periodic[0] else zero)
-    ym = x[i, j - 1] if j > 0 else (x[i, ny - 1] if periodic[1] else zero)
-    yp = x[i, j + 1] if j < ny - 1 else (x[i, 0] if periodic[1] else zero)
-    return xm, xp, ym, yp
+def _neighbour_rows(x, periodic, i, j):
+    """Views of the rows beside row (i, j, :) along x and y (-x, +x, -y, +y), and their
+    factors (:func:`_row_neighbours`). One view expression each, with a computed index:
+    views chosen between x and a separate zero row by a condition made the loops about
+    twice as slow (numba 0.68)."""
+    im, fxm, ip, fxp = _row_neighbours(i, x.shape[0], periodic[0])
+    jm, fym, jp, fyp = _row_neighbours(j, x.shape[1], periodic[1])
+    return x[im, j], x[ip, j], x[i, jm], x[i, jp], (fxm, fxp, fym, fyp)
 
 
 @njit(cache=True, inline="always")
 def _inner_rows(x, i, j):
     """Views of the rows beside an interior row (i, j, :) (0 < i < nx - 1, 0 < j < ny - 1):
-    -x, +x, -y, +y. Taken without a condition, unlike :func:`_neighbour_rows`, they let
-    the constant-stencil loops run about twice as fast (numba 0.68, measured on one core)."""
+    -x, +x, -y, +y, without a condition (the all-open rows' loops)."""
     return x[i - 1, j], x[i + 1, j], x[i, j - 1], x[i, j + 1]
 
 
 @njit(cache=True, inline="always")
-def _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wz, k):
-    """(sum_f w_f x_nb, diag = sum_f w_f) at inner cell 0 < k < nz - 1 of a row, from the
-    row views of x and of the face weights (which carry the level's (h/H)^2 factor; a
-    closed face has w = 0 and drops out of both sums)."""
+def _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wz, f, k):
+    """(sum_f w_f x_nb, diag = sum_f w_f) at inner cell 0 < k < nz - 1 of a GENERAL row,
+    from the row views of x and of the face weights (which carry the level's (h/H)^2
+    factor; a closed face has w = 0 and drops out of both sums) and the neighbour factors
+    ``f`` (0 for a ghost: its face counts in diag, its value is 0)."""
     w0, w1, w2, w3, w4, w5 = wxm[k], wxp[k], wym[k], wyp[k], wz[k], wz[k + 1]
-    s = w0 * xm[k] + w1 * xp[k] + w2 * ym[k] + w3 * yp[k] + w4 * xc[k - 1] + w5 * xc[k + 1]
-    return s, w0 + w1 + w2 + w3 + w4 + w5
+    s = f[0] * w0 * xm[k] + f[1] * w1 * xp[k] + f[2] * w2 * ym[k] + f[3] * w3 * yp[k]
+    return s + w4 * xc[k - 1] + w5 * xc[k + 1], w0 + w1 + w2 + w3 + w4 + w5
 
 
 @njit(cache=True, inline="always")
-def _end_sum(xc, xm, xp, ym, yp, ends, periodic, i, j, side):
-    """(sum_f w_f x_nb, diag) at the end cell k = 0 (side 0) or k = nz - 1 (side 1) of row
-    (i, j), its six face weights read from the compact table ``ends``: the weight arrays
-    are not touched by the constant-stencil rows, and reading them for one cell per row
-    missed the cache."""
+def _end_sum(xc, xm, xp, ym, yp, ends, i, j, side):
+    """(sum_f c_f x_nb, diag) at the end cell k = 0 (side 0) or k = nz - 1 (side 1) of row
+    (i, j) from the compact table ``ends`` (:func:`classify_rows`: neighbour coefficients,
+    0 for a ghost, and diag): the weight arrays are not touched by the ALL_OPEN and
+    ROW_CONSTANT rows, and reading them for one cell per row missed the cache."""
     nz = xc.shape[0]
     k = 0 if side == 0 else nz - 1
-    km, fkm, kp, fkp = _axis_neighbours(k, nz, periodic[2])
-    w0, w1, w2 = ends[i, j, side, 0], ends[i, j, side, 1], ends[i, j, side, 2]
-    w3, w4, w5 = ends[i, j, side, 3], ends[i, j, side, 4], ends[i, j, side, 5]
-    s = w0 * xm[k] + w1 * xp[k] + w2 * ym[k] + w3 * yp[k] + w4 * fkm * xc[km] + w5 * fkp * xc[kp]
-    return s, w0 + w1 + w2 + w3 + w4 + w5
-
-
-@njit(cache=True)
-def end_weights(wx, wy, wz, out):
-    """out[i, j, side] = the six face weights of cell k = 0 (side 0) and k = nz - 1 (side 1)
-    of row (i, j), in the order of :func:`_cell_face_weights`."""
-    nz = wx.shape[2]
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            for side in range(2):
-                w = _cell_face_weights(wx, wy, wz, i, j, 0 if side == 0 else nz - 1)
-                for f in range(6):
-                    out[i, j, side, f] = w[f]
+    km = k - 1 if k > 0 else nz - 1  # (any index where the coefficient is 0)
+    kp = k + 1 if k < nz - 1 else 0
+    e = ends[i, j, side]
+    s = e[0] * xm[k] + e[1] * xp[k] + e[2] * ym[k] + e[3] * yp[k] + e[4] * xc[km] + e[5] * xc[kp]
+    return s, e[6]
 
 
 @njit(cache=True, inline="always")
@@ -170,171 +167,220 @@ def _ends(nz):
 
 
 @njit(cache=True)
-def _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out, residual):
+def classify_rows(wx, wy, wz, coef, periodic, rows, row_coef, ends):
+    """After the weights change: each row's class (ALL_OPEN, ROW_CONSTANT, GENERAL) in
+    ``rows``; for ROW_CONSTANT rows ``row_coef[i, j]`` = the neighbour coefficients of the
+    inner cells (-x, +x, -y, +y: the face weight, 0 for a ghost; z), diag = the sum of the
+    six face weights, and omega / diag (coef[6] = omega); for every row ``ends[i, j,
+    side]`` = the six neighbour coefficients and diag of the end cell k = 0 (side 0) or
+    nz - 1 (side 1). Rows without an open face are GENERAL (their cells are left alone)."""
+    nx, ny, nz = rows.shape[0], rows.shape[1], wx.shape[2]
+    isotropic = coef[0] == coef[1] and coef[1] == coef[2]
+    for i in range(nx):
+        fxm, fxp = _row_neighbours(i, nx, periodic[0])[1::2]
+        for j in range(ny):
+            fym, fyp = _row_neighbours(j, ny, periodic[1])[1::2]
+            for side in range(2):
+                k = 0 if side == 0 else nz - 1
+                fzm, fzp = _row_neighbours(k, nz, periodic[2])[1::2]
+                w = _cell_face_weights(wx, wy, wz, i, j, k)
+                factor = (fxm, fxp, fym, fyp, fzm, fzp)
+                for f in range(6):
+                    ends[i, j, side, f] = w[f] * factor[f]
+                ends[i, j, side, 6] = w[0] + w[1] + w[2] + w[3] + w[4] + w[5]
+            w = _cell_face_weights(wx, wy, wz, i, j, min(1, nz - 1))
+            constant = w[4] == w[5]
+            for k in range(2, nz - 1):
+                if _cell_face_weights(wx, wy, wz, i, j, k) != w:
+                    constant = False
+                    break
+            diag = w[0] + w[1] + w[2] + w[3] + w[4] + w[5]
+            interior = 0 < i < nx - 1 and 0 < j < ny - 1
+            if not constant or diag == 0.0:
+                rows[i, j] = GENERAL
+            elif (
+                isotropic
+                and interior
+                and w == (coef[0], coef[0], coef[0], coef[0], coef[0], coef[0])
+            ):
+                rows[i, j] = ALL_OPEN
+            else:
+                rows[i, j] = ROW_CONSTANT
+            row_coef[i, j, 0], row_coef[i, j, 1] = w[0] * fxm, w[1] * fxp
+            row_coef[i, j, 2], row_coef[i, j, 3] = w[2] * fym, w[3] * fyp
+            row_coef[i, j, 4], row_coef[i, j, 5] = w[4], diag
+            row_coef[i, j, 6] = coef[6] / diag if diag > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _operator_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out, residual):
     """out = (b - A x)[i] if ``residual``, else (A x)[i] (b unread); ``out`` is a plane (a
-    view of the output's plane i, or scratch). The constant-stencil
-    rows come in a loop of their own, with views taken without a condition (see
+    view of the output's plane i, or scratch). Each row class in a loop of its own (see
     :func:`_gs_plane`)."""
     sign = 1.0 if residual else -1.0
     c0, c1, c2 = coef[0], coef[1], coef[2]
     d_uniform = 2.0 * (c0 + c1 + c2)
     nz = x.shape[2]
     for j in range(x.shape[1]):
-        if not uniform[i, j]:
+        if rows[i, j] != ALL_OPEN:
             continue
         xc, bc, oc = x[i, j], b[i, j], out[j]
         am, ap, bm, bp = _inner_rows(x, i, j)
         for k in range(1, nz - 1):  # contiguous, no weight reads: vectorised
             s = c0 * (am[k] + ap[k]) + c1 * (bm[k] + bp[k]) + c2 * (xc[k - 1] + xc[k + 1])
             oc[k] = (bc[k] if residual else 0.0) - sign * (d_uniform * xc[k] - s)
-        _operator_row_ends(xc, bc, oc, am, ap, bm, bp, ends, periodic, i, j, residual)
-    zero = np.zeros(nz, x.dtype)
+        _operator_row_ends(xc, bc, oc, am, ap, bm, bp, ends, i, j, residual)
     for j in range(x.shape[1]):
-        if uniform[i, j]:
+        if rows[i, j] != ROW_CONSTANT:
             continue
         xc, bc, oc = x[i, j], b[i, j], out[j]
-        xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
+        am, ap, bm, bp, _ = _neighbour_rows(x, periodic, i, j)
+        r = row_coef[i, j]
+        r0, r1, r2, r3, rz, d = r[0], r[1], r[2], r[3], r[4], r[5]
+        for k in range(1, nz - 1):
+            s = r0 * am[k] + r1 * ap[k] + r2 * bm[k] + r3 * bp[k] + rz * xc[k - 1] + rz * xc[k + 1]
+            oc[k] = (bc[k] if residual else 0.0) - sign * (d * xc[k] - s)
+        _operator_row_ends(xc, bc, oc, am, ap, bm, bp, ends, i, j, residual)
+    for j in range(x.shape[1]):
+        if rows[i, j] != GENERAL:
+            continue
+        xc, bc, oc = x[i, j], b[i, j], out[j]
+        xm, xp, ym, yp, f = _neighbour_rows(x, periodic, i, j)
         wxm, wxp, wym, wyp, wzc = wx[i, j], wx[i + 1, j], wy[i, j], wy[i, j + 1], wz[i, j]
         for k in range(1, nz - 1):
-            s, d = _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wzc, k)
+            s, d = _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wzc, f, k)
             oc[k] = (bc[k] if residual else 0.0) - sign * (d * xc[k] - s)
-        _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, periodic, i, j, residual)
+        _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, i, j, residual)
 
 
 @njit(cache=True, inline="always")
-def _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, periodic, i, j, residual):
+def _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, i, j, residual):
     """The end cells k = 0 and nz - 1 of row (i, j) for :func:`_operator_plane`."""
     sign = 1.0 if residual else -1.0
     nz = xc.shape[0]
     for side in range(_ends(nz)):
-        s, d = _end_sum(xc, xm, xp, ym, yp, ends, periodic, i, j, side)
+        s, d = _end_sum(xc, xm, xp, ym, yp, ends, i, j, side)
         k = 0 if side == 0 else nz - 1
         oc[k] = (bc[k] if residual else 0.0) - sign * (d * xc[k] - s)
 
 
 @njit(cache=True, parallel=True)
-def residual(x, b, wx, wy, wz, periodic, uniform, ends, coef, out):
+def residual(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
     """out = b - A x."""
     for i in prange(x.shape[0]):
-        _operator_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, out[i], True)
+        _operator_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], True)
 
 
 @njit(cache=True, parallel=True)
-def apply_operator(x, wx, wy, wz, periodic, uniform, ends, coef, out):
+def apply_operator(x, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
     """out = A x = sum_f c w_f (x_c - x_nb); returns x . A x, summed as :func:`dot` does
     (plane by plane while the plane is in cache: one pass less per CG iteration)."""
     partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        _operator_plane(x, x, wx, wy, wz, periodic, uniform, ends, coef, i, out[i], False)
+        _operator_plane(x, x, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], False)
         partial[i] = _plane_dot(x, out, i)
     return partial.sum()
 
 
 @njit(cache=True, fastmath=FAST_MATH)
-def _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, colour):
+def _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, colour):
     """One colour of plane i. Cells of one colour do not neighbour each other, so the
-    order within a colour does not matter: the constant-stencil rows first, in a function
-    of their own (with the other rows' code in the same loop they ran twice as slow), then
-    the other rows. The stores are written out in the loops: an inlined helper that stores
-    into an array made the loop three to four times slower (numba 0.68)."""
-    # all open, one coefficient: the fewest flops
-    fast = coef[0] == coef[1] and coef[1] == coef[2]
-    if fast and coef[6] == 1.0:
-        _constant_rows_gauss_seidel(x, b, periodic, uniform, ends, coef, i, colour)
-    elif fast:
-        _constant_rows_sor(x, b, periodic, uniform, ends, coef, i, colour)
-    zero = np.zeros(x.shape[2], x.dtype)
-    for j in range(x.shape[1]):  # the other rows
-        if fast and uniform[i, j]:
+    order within a colour does not matter: each row class in a loop of its own (with the
+    other rows' code in the same loop the ALL_OPEN rows ran twice as slow), ALL_OPEN in
+    functions of their own. The stores are written out in the loops: an inlined helper
+    that stores into an array made the loop three to four times slower (numba 0.68)."""
+    if coef[6] == 1.0:
+        _constant_rows_gauss_seidel(x, b, rows, ends, coef, i, colour)
+    else:
+        _constant_rows_sor(x, b, rows, ends, coef, i, colour)
+    nz = x.shape[2]
+    keep, omega = coef[5], coef[6]
+    for j in range(x.shape[1]):  # ROW_CONSTANT: per-row coefficients, no weight reads
+        if rows[i, j] != ROW_CONSTANT:
             continue
         first = (i + j + colour) % 2
-        _gs_row(x, b, wx, wy, wz, periodic, uniform, coef, zero, i, j, first)
-        xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
-        _gs_row_ends(x[i, j], b[i, j], xm, xp, ym, yp, periodic, ends, i, j, first, coef[6])
+        xc, bc = x[i, j], b[i, j]
+        am, ap, bm, bp, _ = _neighbour_rows(x, periodic, i, j)
+        r = row_coef[i, j]
+        r0, r1, r2, r3, rz, gain = r[0], r[1], r[2], r[3], r[4], r[6]
+        for m in range((nz - 2 + first) // 2):
+            k = 2 - first + 2 * m
+            s = r0 * am[k] + r1 * ap[k] + r2 * bm[k] + r3 * bp[k] + rz * (xc[k - 1] + xc[k + 1])
+            xc[k] = keep * xc[k] + gain * (bc[k] + s)
+        _gs_row_ends(xc, bc, am, ap, bm, bp, ends, i, j, first, omega)
+    for j in range(x.shape[1]):  # GENERAL: the face weights cell by cell
+        if rows[i, j] != GENERAL:
+            continue
+        first = (i + j + colour) % 2
+        xc, bc = x[i, j], b[i, j]
+        xm, xp, ym, yp, f = _neighbour_rows(x, periodic, i, j)
+        wxm, wxp, wym, wyp, wzc = wx[i, j], wx[i + 1, j], wy[i, j], wy[i, j + 1], wz[i, j]
+        for m in range((nz - 2 + first) // 2):
+            k = 2 - first + 2 * m
+            s, d = _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wzc, f, k)
+            if d > 0.0:  # (a cell without an open face is left alone)
+                xc[k] += omega * ((bc[k] + s) / d - xc[k])
+        _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega)
 
 
 @njit(cache=True, inline="always")
 def _constant_row(x, b, i, j, colour):
-    """Row (i, j) for the all-open smoother loops: the first k of this colour, how many
+    """Row (i, j) for the ALL_OPEN smoother loops: the first k of this colour, how many
     inner cells of it (k = 2 - first, 4 - first, ... < nz - 1: counted, since a stepped
     range with run-time bounds compiles to a loop almost twice as slow), and views of the
-    row, of b and of the neighbour rows taken without a condition (views chosen by one,
-    :func:`_neighbour_rows`, made the loop about twice as slow)."""
+    row, of b and of the neighbour rows taken without a condition."""
     first = (i + j + colour) % 2
     count = (x.shape[2] - 2 + first) // 2
     return first, count, x[i, j], b[i, j], _inner_rows(x, i, j)
 
 
 @njit(cache=True, fastmath=FAST_MATH)
-def _constant_rows_gauss_seidel(x, b, periodic, uniform, ends, coef, i, colour):
-    """One colour of the all-open rows of plane i, omega = 1: x_c = (b_c + sum x_nb) / diag
+def _constant_rows_gauss_seidel(x, b, rows, ends, coef, i, colour):
+    """One colour of the ALL_OPEN rows of plane i, omega = 1: x_c = (b_c + sum x_nb) / diag
     as gain b_c + gain c0 sum x_nb (coef[3], coef[4], in x's precision: float32 arithmetic
     throughout is a third faster than converting each value to float64 and back)."""
     gain, g = coef[3], coef[4]
     for j in range(x.shape[1]):
-        if uniform[i, j]:
+        if rows[i, j] == ALL_OPEN:
             first, count, xc, bc, (am, ap, bm, bp) = _constant_row(x, b, i, j, colour)
             for m in range(count):
                 k = 2 - first + 2 * m
                 nb = am[k] + ap[k] + bm[k] + bp[k] + xc[k - 1] + xc[k + 1]
                 xc[k] = gain * bc[k] + g * nb
-            _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first, coef[6])
+            _gs_row_ends(xc, bc, am, ap, bm, bp, ends, i, j, first, coef[6])
 
 
 @njit(cache=True, fastmath=FAST_MATH)
-def _constant_rows_sor(x, b, periodic, uniform, ends, coef, i, colour):
+def _constant_rows_sor(x, b, rows, ends, coef, i, colour):
     """:func:`_constant_rows_gauss_seidel` with over-relaxation: x_c = (1 - omega) x_c +
     omega (b_c + sum x_nb) / diag, 1 - omega in coef[5] (a loop of its own: reading x_c
     makes it a third slower than Gauss-Seidel's)."""
     gain, g, keep = coef[3], coef[4], coef[5]
     for j in range(x.shape[1]):
-        if uniform[i, j]:
+        if rows[i, j] == ALL_OPEN:
             first, count, xc, bc, (am, ap, bm, bp) = _constant_row(x, b, i, j, colour)
             for m in range(count):
                 k = 2 - first + 2 * m
                 nb = am[k] + ap[k] + bm[k] + bp[k] + xc[k - 1] + xc[k + 1]
                 xc[k] = keep * xc[k] + gain * bc[k] + g * nb
-            _gs_row_ends(xc, bc, am, ap, bm, bp, periodic, ends, i, j, first, coef[6])
+            _gs_row_ends(xc, bc, am, ap, bm, bp, ends, i, j, first, coef[6])
 
 
 @njit(cache=True, inline="always")
-def _gs_row(x, b, wx, wy, wz, periodic, uniform, coef, zero, i, j, first):
-    """The inner cells of colour ``first`` in row (i, j) (see :func:`_gs_plane`), for rows
-    with a closed face or anisotropic coefficients."""
-    c0, c1, c2 = coef[0], coef[1], coef[2]
-    gain, keep, omega = coef[3], coef[5], coef[6]
-    count = (x.shape[2] - 2 + first) // 2
-    xc, bc = x[i, j], b[i, j]
-    xm, xp, ym, yp = _neighbour_rows(x, periodic, zero, i, j)
-    if uniform[i, j]:  # every face open: the constant stencil, no weight reads
-        for m in range(count):
-            k = 2 - first + 2 * m
-            s = c0 * (xm[k] + xp[k]) + c1 * (ym[k] + yp[k]) + c2 * (xc[k - 1] + xc[k + 1])
-            xc[k] = keep * xc[k] + gain * (bc[k] + s)
-    else:
-        wxm, wxp, wym, wyp, wzc = wx[i, j], wx[i + 1, j], wy[i, j], wy[i, j + 1], wz[i, j]
-        for m in range(count):
-            k = 2 - first + 2 * m
-            s, d = _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wzc, k)
-            if d > 0.0:  # (a cell without an open face is left alone)
-                xc[k] += omega * ((bc[k] + s) / d - xc[k])
-
-
-@njit(cache=True, inline="always")
-def _gs_row_ends(xc, bc, xm, xp, ym, yp, periodic, ends, i, j, first, omega):
+def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
     """The end cells k = 0 and nz - 1 of row (i, j) if they have colour ``first``, from
     the views of the row and its neighbours."""
     nz = xc.shape[0]
     for side in range(_ends(nz)):
         k = 0 if side == 0 else nz - 1
         if k % 2 == first:
-            s, d = _end_sum(xc, xm, xp, ym, yp, ends, periodic, i, j, side)
+            s, d = _end_sum(xc, xm, xp, ym, yp, ends, i, j, side)
             if d > 0.0:  # (a cell without an open face is left alone)
                 xc[k] += omega * ((bc[k] + s) / d - xc[k])
 
 
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)
-def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour, halves):
+def gauss_seidel(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, colour, halves):
     """``halves`` half sweeps of red-black SOR (the level's omega, coef[6]) on A x = b,
     alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first), planes
     in parallel: a cycle's smoothing on one level is one call (the Python loop of one call per half
@@ -348,36 +394,13 @@ def gauss_seidel(x, b, wx, wy, wz, periodic, uniform, ends, coef, colour, halves
     for half in range(halves):
         c = (colour + half) % 2
         for i in prange(last):
-            _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, c)
+            _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
         for i in range(last, nx):
-            _gs_plane(x, b, wx, wy, wz, periodic, uniform, ends, coef, i, c)
-
-
-@njit(cache=True)
-def uniform_rows(wx, wy, wz, coef, out):
-    """out[i, j] = every face of the cells k = 1..nz-2 of interior row (i, j) has the
-    weight coef[axis], i.e. all open: the kernels then use the constant stencil there."""
-    nx, ny, nz = out.shape[0], out.shape[1], wx.shape[2]
-    out[...] = False
-    for i in range(1, nx - 1):
-        for j in range(1, ny - 1):
-            ok = True
-            for k in range(1, nz - 1):
-                if (
-                    wx[i, j, k] != coef[0]
-                    or wx[i + 1, j, k] != coef[0]
-                    or wy[i, j, k] != coef[1]
-                    or wy[i, j + 1, k] != coef[1]
-                    or wz[i, j, k] != coef[2]
-                    or wz[i, j, k + 1] != coef[2]
-                ):
-                    ok = False
-                    break
-            out[i, j] = ok
+            _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
 
 
 @njit(cache=True, parallel=True)
-def residual_restrict(x, b, wx, wy, wz, periodic, uniform, ends, coef, ratio, coarse):
+def residual_restrict(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, ratio, coarse):
     """coarse[I,J,K] = mean of the residual b - A x over the fine cells it covers (ratio 1
     or 2 per axis). The residual of the fine planes under one coarse plane goes to a
     scratch block and straight into the mean: it is never stored as a whole field (a
@@ -389,7 +412,7 @@ def residual_restrict(x, b, wx, wy, wz, periodic, uniform, ends, coef, ratio, co
         fine = np.empty((r0, x.shape[1], x.shape[2]), x.dtype)
         for a in range(r0):
             _operator_plane(
-                x, b, wx, wy, wz, periodic, uniform, ends, coef, r0 * I + a, fine[a], True
+                x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, r0 * I + a, fine[a], True
             )
         for J in range(n1):
             coarse[I, J, :] = 0.0
@@ -539,19 +562,21 @@ class _Level:
         self.x = np.zeros(self.shape, dtype)
         self.b = np.zeros(self.shape, dtype)
         self.ratio = np.ones(3, dtype=np.int64)  # to the next coarser level
-        self.uniform = np.zeros((nx, ny), dtype=np.bool_)  # see classify_rows
-        self.ends = np.zeros((nx, ny, 2, 6), dtype)  # the face weights of each row's end cells
+        # each row's class and coefficients, and its end cells' (classify_rows)
+        self.rows = np.full((nx, ny), GENERAL, dtype=np.int8)
+        self.row_coef = np.zeros((nx, ny, 7), dtype)
+        self.ends = np.zeros((nx, ny, 2, 7), dtype)
         # small levels run in one compiled call per visit (:mod:`.coarse_levels`)
         self.small = np.prod(self.shape) < SERIAL_CELLS
 
     def args(self):
-        return (self.w[0], self.w[1], self.w[2], self.periodic, self.uniform, self.ends, self.coef)
+        w, p = self.w, self.periodic
+        return (w[0], w[1], w[2], p, self.rows, self.row_coef, self.ends, self.coef)
 
     def classify_rows(self):
         """After the weights change: the rows whose interior cells have every face open, and
         the compact table of the rows' end-cell weights."""
-        uniform_rows(*self.w, self.coef, self.uniform)
-        end_weights(*self.w, self.ends)
+        classify_rows(*self.w, self.coef, self.periodic, self.rows, self.row_coef, self.ends)
 
     def smooth(self, x, b, sweeps, reverse):
         """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call)."""
