@@ -41,8 +41,10 @@ end cells of every row take their coefficients from a compact table. The classes
 loops of their own, the ALL_OPEN rows with neighbour views taken without a condition,
 which made the smoother about 1.3 times as fast as one loop over all rows (2.7 -> 2.05 ns
 per cell update at 64^3, one core, A/B); the ROW_CONSTANT class (the domain-face rows had
-gone through the weighted loop) took the projection from 29.4 to 25.3 ms at 64^3 (one
-core, minimum of 12 steps, A/B in one process; the operator gives the same bits). Stores
+gone through the weighted loop) took the projection from 28.7 to 26.1 ms at 64^3 and
+from 211 to 196 ms at 128^3 (one core, minimum of 12 and 8 steps, A/B in one process; the
+operator gives the same bits, the smoother's fast-math float32 rounding differs: the
+velocity 3.6e-13 apart, relative, after 22 steps at 32^3). Stores
 are written out in the loops: numba made a loop with an inlined storing helper three to
 four times slower. The
 levels below ``SERIAL_CELLS`` cells run as one compiled call per visit on flat per-cell
