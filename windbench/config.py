@@ -143,6 +143,8 @@ class ClothConfig:
     substeps: int = 8  # XPBD substeps per sim.dt
     edge_iterations: int = 2  # passes over the threads (the first also the shear edges) per substep
     threads: bool = True  # solve the stretch edges thread by thread (false: edge by edge)
+    strain_limit: float = 0.03  # warp/weft edges at most this much longer than at rest (0: off)
+    limit_passes: int = 32  # at most this many strain-limit passes over the threads per substep
     gravity: float = 9.81  # m/s^2, along -z
     collision_margin: float = 0.005  # m, cloth keeps this distance from bodies
     friction: float = 0.3  # Coulomb coefficient cloth/body

@@ -112,6 +112,45 @@ def test_one_chain_solve_makes_a_straight_inextensible_chain_exact():
             assert mass @ p[:, 2] == pytest.approx(mass @ x[:, 2], rel=1e-12)
 
 
+def test_strain_limit_brings_the_over_stretched_edges_of_a_chain_to_the_limit():
+    """Limit mode of solve_chains on a straight chain (linear constraints: one solve is
+    exact): edges longer than (1 + limit) L end at exactly that length (the others are
+    free: they move with their ends), repeated solves end with no edge over the trigger
+    (1 + 1.1 limit) L; the mass-weighted centre of a free chain stays put, a pin does not
+    move; a chain whose edges stay within the slack above the limit is not touched; the
+    multipliers are not used."""
+    rng = np.random.default_rng(4)
+    m, limit = 10, 0.03
+    rest = rng.uniform(0.05, 0.1, m)
+    factor = np.where(np.arange(m) % 3 == 0, 1.10, rng.uniform(0.9, 1.02, m))
+    for inv_mass in (np.r_[0.0, rng.uniform(0.5, 2.0, m)], rng.uniform(0.5, 2.0, m + 1)):
+        p = np.zeros((m + 1, 3))
+        p[1:, 2] = -np.cumsum(rest * factor)
+        x = p.copy()
+        ptr, verts, _, alpha, scale, lam, work = _vertical_chain(rest, inv_mass, np.zeros(m))
+        lam[:] = 7.0
+        solved = solve_chains(p, inv_mass, ptr, verts, rest, alpha, scale, lam, work, limit)
+        assert solved == 1
+        over = factor > 1 + limit
+        np.testing.assert_allclose(-np.diff(p[:, 2])[over], rest[over] * (1 + limit), rtol=1e-12)
+        for _ in range(20):  # the passes of xpbd_frame, until no chain is solved
+            if solve_chains(p, inv_mass, ptr, verts, rest, alpha, scale, lam, work, limit) == 0:
+                break
+        assert np.all(-np.diff(p[:, 2]) <= rest * (1 + 1.1 * limit) * (1 + 1e-12))
+        np.testing.assert_array_equal(lam, 7.0)
+        np.testing.assert_array_equal(p[:, :2], 0.0)
+        if inv_mass[0] == 0.0:
+            assert p[0, 2] == 0.0
+        if inv_mass[0] > 0.0:
+            mass = 1.0 / inv_mass
+            assert mass @ p[:, 2] == pytest.approx(mass @ x[:, 2], rel=1e-12)
+    p = np.zeros((m + 1, 3))
+    p[1:, 2] = -np.cumsum(rest * (1 + 1.05 * limit))  # over the limit, within the slack
+    before = p.copy()
+    assert solve_chains(p, inv_mass, ptr, verts, rest, alpha, scale, lam, work, limit) == 0
+    np.testing.assert_array_equal(p, before)
+
+
 def test_chain_of_springs_hangs_at_the_static_elongation():
     """Implicit Euler by substeps (predict, one exact chain solve, v = dx/h) comes to rest
     where each spring carries the weight below it: elongation_k = g sum_(i>k) m_i / k_k."""
@@ -296,6 +335,8 @@ def test_same_input_gives_the_same_bits():
         ({"collision_margin": -0.1}, "cloth.collision_margin"),
         ({"solver": "verlet"}, "cloth.solver"),
         ({"threads": "yes"}, "cloth.threads"),
+        ({"strain_limit": -0.01}, "cloth.strain_limit"),
+        ({"limit_passes": 0}, "cloth.limit_passes"),
     ],
 )
 def test_bad_solver_settings_name_their_key(change, key):

@@ -70,8 +70,10 @@ def test_summary_has_one_row_per_run(report, sweep):
     )
     # two_flags_wall names a sheltered and an exposed flag: the force ratio is measured;
     # the global field has no lee, so both flags see the same wind at the same angle; they
-    # sit at different coordinates, so their rounding differs (about 1e-12 after 1.5 s)
-    np.testing.assert_allclose(summary["lee_force_ratio"], 1.0, rtol=1e-9)
+    # sit at different coordinates, so their rounding differs (about 1e-12 after 1.5 s),
+    # and where a thread touches the strain limit (cloth.strain_limit) that rounding can
+    # decide whether it is solved on one flag and not on the other (8e-5 apart, measured)
+    np.testing.assert_allclose(summary["lee_force_ratio"], 1.0, rtol=1e-3)
     assert (summary["seconds_per_step"] > 0).all()
 
 

@@ -36,7 +36,10 @@ Per frame of length dt, with ``h = dt / cloth.substeps``, each substep does
    than in the rest shape, which keeps a hanging cloth from sagging through the slow
    propagation of Gauss-Seidel along long threads;
 3. contacts: every free vertex is moved out to ``cloth.collision_margin`` from the bodies,
-   with Coulomb friction (:mod:`windbench.cloth.collision`);
+   with Coulomb friction (:mod:`windbench.cloth.collision`); then the strain limit
+   (*Strain limiting* below): passes over the threads that shorten every warp/weft edge
+   longer than ``(1 + cloth.strain_limit) L``, each followed by the contacts again, until
+   no thread needs one (at most ``cloth.limit_passes``);
 4. ``v = (p - x) / h``; ``x = p``;
 
 and after the last substep, 5. stiffness-proportional (Rayleigh) damping with time constant
@@ -47,7 +50,7 @@ deformation but not rigid motion, and leaves static equilibria where they are.
 Accuracy. One pass per substep reproduces a constraint's stiffness k once the substep
 resolves it, ``alpha~ >> w |grad C|^2`` (``h << sqrt(m / k)`` per vertex); stiffer
 constraints act as inextensible ones. Real cloth is stiff in stretch (inextensible here:
-less than 5% stretch hanging, tested) and soft in bending (1e-6..1e-4 N m, resolved).
+less than 5% stretch hanging, tested, with the strain limit's help on fine meshes) and soft in bending (1e-6..1e-4 N m, resolved).
 Measured: the static sag of a stiff cantilever strip (B = 0.01 N m, 2 cm cells) lies 4%
 above the discrete beam at 512 substeps (a slow test), 8% at 128, 23% at 64. Low bending
 modes are damped mainly by the air (aero.py); the per-constraint damping of step 5 is one
@@ -71,27 +74,44 @@ elimination is one chain of dependent divisions, so a pass costs more than the
 colour-ordered edge sweep, whose independent edges the processor overlaps; but two passes
 over the threads hold the stretch better than four edge passes did, so the default is
 ``cloth.edge_iterations=2``. Measured (``experiments/bench_cloth.py --stretch``, 4 s runs,
-defaults; the tables are in ``experiments/README.md``): flags in 6 m/s wind 0.9 / 2.0 /
+defaults without the strain limit below; the tables are in ``experiments/README.md``): flags in 6 m/s wind 0.9 / 2.0 /
 2.6% median largest edge strain at 40x25 / 64x64 / 100x60 (edge by edge, 4 passes: 5.0 /
 7.2 / 11%), the 40 x 25 flag hanging from its pole 1.6% (was 11-12%), at 3.0 / 12.7 /
-16.1 ms a frame (edge by edge, 4 passes: 2.8 / 10.1 / 17.4 ms). Not fixed: the hanging
-64 x 64 and 100 x 60 flags (26% and 30% at the end of 4 s; 14% and 27% with 4 passes; 23%
-and 25% edge by edge). Why (``experiments/hang_cloth.py``; figures and the changes tried
-in ``experiments/README.md``): one projection of a shear edge per substep exerts no more
-than its vertices' inertia allows (``k h^2 (w_i + w_j)`` is about 4 at 40 x 25, 16-23 on
-the finer flags) and the thread pass after it undoes most of it, so on fine meshes the
-shear resistance saturates (10 frames into the fall the cells next to the pole of the
+16.1 ms a frame (edge by edge, 4 passes: 2.8 / 10.1 / 17.4 ms). The threads alone do not
+hold the hanging 64 x 64 and 100 x 60 flags (26% and 30% at the end of 4 s): see below.
+
+Strain limiting. On fine meshes the shear resistance saturates at 8 substeps: one
+projection of a shear edge per substep exerts no more than its vertices' inertia allows
+(``k h^2 (w_i + w_j)`` is about 4 at 40 x 25, 16-23 on the finer flags) and the thread pass
+after it undoes most of it (10 frames into the fall the cells next to the pole of the
 64 x 64 flag shear by 29 / 15 / 10 / 9.4 degrees for G = 0 / 5 / 50 / 500 N/m; 2.6 degrees
-for G = 50 with 32 substeps). The flag collapses in plane near the pole, the cells at the
-top corner end crushed (diagonals at -60% / +40%), and there each substep's shear
-projection throws the top-row vertices farther than two thread passes pull back
-(64 x 64: ``shear_stiffness=5`` 24%, ``=500`` 28%; ``=0``: 1.8%, 100 x 60 3.7%). Projecting the shear
-edges in every one of 16 passes keeps the other diagonals within +-3% but leaves the
-corner crushed and the top row stretched by 9% / 11% (64 x 64 / 100 x 60): a fold from
-the top pin that turns the top edge down the pole follows cell diagonals only where the pin
-is a degree-8 vertex of the alternating triangulation and the cells are square (100 x 61:
-6%, 64 x 65: 7%, same 16 passes); 32 substeps give 4.9% (64 x 64) and 8.1% (100 x 60) at
-four times the cost, 3.3% on a 100 x 61 flag.
+for G = 50 with 32 substeps). A flag hanging from its pole in still air then collapses in
+plane near the pole, and at the top corner each substep's shear projection throws the
+top-row vertices farther than two thread passes pull back: 26% (64 x 64) and 30%
+(100 x 60) stretch at the end of 4 s; ``experiments/hang_cloth.py`` and
+``experiments/README.md`` give the diagnosis and the changes tried. Converging it costs
+far more than the frame budget (32 substeps: 4.9% and 8.1% at four times the cost). So,
+as production cloth solvers do (Provot 1995, deformation constraints; Bridson, Fedkiw and
+Anderson 2002; Goldenthal et al. 2007, inextensible cloth), the stretch is limited: after
+the contacts, the threads are solved again in limit mode (:func:`solve_chains` with
+``limit``): only the edges longer than ``(1 + cloth.strain_limit) L`` are constraints,
+rigid, brought to that length, the others free; the contacts follow each pass, so that they
+still hold at the end of the substep. A thread is solved only while one of its edges is
+longer than ``(1 + 1.1 cloth.strain_limit) L`` (``LIMIT_SLACK``), so the threads of a
+hanging flag that sit at the limit are not solved pass after pass; the passes stop when no
+thread needs one (at most ``cloth.limit_passes``). Positions move, and step 4 turns the
+moves into velocities, as for every constraint. Woven fabric is itself stiff beyond a few
+per cent of strain; ``cloth.strain_limit=0`` turns the limit off (an elastic fabric then
+stretches as its stiffness says). Measured (``experiments/bench_cloth.py --stretch``,
+defaults, 3% limit): largest warp/weft strain of the flag hanging from its pole, end of
+4 s (max over 2-4 s), 1.8% (1.8%) / 3.3% (3.3%) / 3.3% (3.8%) at 40 x 25 / 64 x 64 /
+100 x 60; in 6 m/s wind median 1.0 / 2.0 / 2.5%, max 3.2 / 3.3 / 3.3% (without the limit
+9.4% and 8.2% at single instants on the fine flags). Cost (CPU time of the whole
+simulation step, A/B in one process, minimum): in wind 2.09 -> 2.22, 10.2 -> 10.5,
+15.2 -> 15.4 ms a frame; hanging in still air, where the limit works in every substep,
+10.3 -> 14.7 ms at 64 x 64 and 15.3 -> 24.6 ms at 100 x 60. The active set is a threshold:
+two flags whose rounding differs by 1e-12 can take different limit passes (the two flags of
+``two_flags_wall`` in the global wind: forces 8e-5 apart).
 
 Multi-rate bending. The hinge pass is about half of a frame, and soft fabric bends far
 slower than a substep: a hinge's own oscillation, omega^2 = k_b sum_q w_q |grad_q theta|^2
@@ -314,8 +334,16 @@ def project_hinge(p, inv_mass, i0, i1, i2, i3, rest, alpha):
     p[i3, 2] += f3 * nbz
 
 
+# Strain limiting (module docstring): a thread is solved again only when one of its edges
+# is longer than (1 + (1 + LIMIT_SLACK) strain_limit) L, and then its edges longer than
+# (1 + strain_limit) L are brought to that length. Without the slack, the threads of a
+# hanging flag that sit at the limit were solved pass after pass (100x60 flag hanging from
+# its pole: 57 instead of 21 ms a frame with 32 passes, 3.0% against 3.3% largest strain).
+LIMIT_SLACK = 0.1
+
+
 @njit(cache=True)
-def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, work):
+def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, work, limit=0.0):
     """One direct XPBD solve of each chain of distance constraints, in place.
 
     Chain c (``chain_ptr``, ``chain_vert`` of :func:`~windbench.cloth.topology.thread_chains`)
@@ -327,22 +355,44 @@ def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, wo
     diagonally dominant), then ``p_v += w_v sum_k dlambda_k grad_v C_k``. An edge with
     ``scale`` 0 (two pins, zero stiffness) or zero length is an identity row (dlambda 0).
     A chain of one edge is the plain XPBD edge projection. ``work`` (E, 5): n, c', r'.
+
+    With ``limit`` > 0 it is the strain limit instead (module docstring, *Strain
+    limiting*): only the edges longer than (1 + limit) L_k are constraints, C_k =
+    |p_v(k+1) - p_v(k)| - (1 + limit) L_k with no compliance and no multiplier (``alpha``
+    and ``lam`` unread), the others identity rows, and a chain without such an edge is
+    skipped. Returns how many chains it solved in that mode (0 otherwise).
     """
+    solved = 0
+    trigger = 1.0 + (1.0 + LIMIT_SLACK) * limit  # a chain is solved above this stretch
+    trigger2 = trigger * trigger
     for c in range(chain_ptr.shape[0] - 1):
         e0, e1 = chain_ptr[c], chain_ptr[c + 1]
+        if limit > 0.0:  # strain limit: skip the chains that keep it
+            over = False
+            for e in range(e0, e1):
+                a, b = chain_vert[e + c], chain_vert[e + c + 1]
+                dx, dy, dz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+                over |= scale[e] != 0.0 and dx * dx + dy * dy + dz * dz > trigger2 * rest[e] ** 2
+            if not over:
+                continue
+            solved += 1
         inv_den = 0.0  # 1 / pivot of the previous row
         for e in range(e0, e1):  # forward elimination
             a, b = chain_vert[e + c], chain_vert[e + c + 1]
             dx, dy, dz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
             ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if scale[e] == 0.0 or ln == 0.0:  # identity row
-                work[e, 0] = work[e, 1] = work[e, 2] = 0.0
+            target = rest[e] * (1.0 + limit)
+            if scale[e] == 0.0 or ln == 0.0 or (limit > 0.0 and ln <= target):
+                work[e, 0] = work[e, 1] = work[e, 2] = 0.0  # an identity row
                 diag, rhs = 1.0, 0.0
             else:
                 inv_ln = 1.0 / ln
                 work[e, 0], work[e, 1], work[e, 2] = dx * inv_ln, dy * inv_ln, dz * inv_ln
-                diag = inv_mass[a] + inv_mass[b] + alpha[e]
-                rhs = rest[e] - ln - alpha[e] * lam[e]  # -C - alpha~ lambda
+                if limit > 0.0:  # -C, rigid
+                    diag, rhs = inv_mass[a] + inv_mass[b], target - ln
+                else:  # -C - alpha~ lambda
+                    diag = inv_mass[a] + inv_mass[b] + alpha[e]
+                    rhs = rest[e] - ln - alpha[e] * lam[e]
             if e > e0:  # off-diagonal -w_a n_(k-1) . n_k with the previous edge
                 off = -inv_mass[a] * (
                     work[e - 1, 0] * work[e, 0]
@@ -358,12 +408,14 @@ def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, wo
         dl = 0.0
         for e in range(e1 - 1, e0 - 1, -1):  # back substitution and the position update
             dl = work[e, 4] if e == e1 - 1 else work[e, 4] - work[e, 3] * dl
-            lam[e] += dl
+            if limit == 0.0:
+                lam[e] += dl
             a, b = chain_vert[e + c], chain_vert[e + c + 1]
             sa, sb = inv_mass[a] * dl, inv_mass[b] * dl
             for k in range(3):
                 p[b, k] += sb * work[e, k]
                 p[a, k] -= sa * work[e, k]
+    return solved
 
 
 @njit(cache=True)
@@ -448,6 +500,8 @@ def xpbd_frame(
     dt,
     substeps,
     edge_iterations,
+    strain_limit,
+    limit_passes,
     x_out,
     v_out,
     scratch_x,
@@ -546,9 +600,28 @@ def xpbd_frame(
                 p[i, 1] = p[a, 1] + s * dy
                 p[i, 2] = p[a, 2] + s * dz
         if has_bodies:  # 3. contacts, for vertices inside a body's grown bounding box
-            for i in range(n):
-                if inv_mass[i] > 0.0 and near_a_body(body_boxes, p[i, 0], p[i, 1], p[i, 2]):
-                    project_vertex(body_kinds, body_params, margin, friction, xp[i], p[i], normal)
+            _contacts(
+                p, xp, inv_mass, body_kinds, body_params, body_boxes, margin, friction, normal
+            )
+        for _ in range(limit_passes if strain_limit > 0.0 else 0):  # 3b. strain limit
+            solved = solve_chains(
+                p,
+                inv_mass,
+                chain_ptr,
+                chain_vert,
+                edge_rest,
+                edge_alpha,
+                edge_scale,
+                lam,
+                scratch_chain,
+                strain_limit,
+            )
+            if solved == 0:  # every thread kept it: nothing moved
+                break
+            if has_bodies:  # the contacts again, so that they hold at the end
+                _contacts(
+                    p, xp, inv_mass, body_kinds, body_params, body_boxes, margin, friction, normal
+                )
         for i in range(n):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
                 vv[i, k] = (p[i, k] - xp[i, k]) * inv_h
@@ -563,6 +636,16 @@ def xpbd_frame(
             energy += 0.5 * mass[i] * vv[i, k] * vv[i, k]
             finite = finite and math.isfinite(p[i, k]) and math.isfinite(vv[i, k])
     return work, energy, finite
+
+
+@njit(cache=True, inline="always")
+def _contacts(p, xp, inv_mass, body_kinds, body_params, body_boxes, margin, friction, normal):
+    """Step 3: every free vertex inside a body's grown bounding box moved out to the margin
+    (:func:`~windbench.cloth.collision.project_vertex`, friction against its motion from xp;
+    ``normal`` (3,) work space)."""
+    for i in range(p.shape[0]):
+        if inv_mass[i] > 0.0 and near_a_body(body_boxes, p[i, 0], p[i, 1], p[i, 2]):
+            project_vertex(body_kinds, body_params, margin, friction, xp[i], p[i], normal)
 
 
 @njit(cache=True)
@@ -638,6 +721,13 @@ class XPBDCloth:
                 "cloth.edge_iterations", f"must be an integer >= 1, got {iterations!r}"
             )
         self.edge_iterations = iterations
+        self.strain_limit = _number(
+            _param(params, "strain_limit", 0.03), "cloth.strain_limit", False
+        )
+        passes = _param(params, "limit_passes", 32)
+        if not isinstance(passes, int) or isinstance(passes, bool) or passes < 1:
+            raise ConfigError("cloth.limit_passes", f"must be an integer >= 1, got {passes!r}")
+        self.limit_passes = passes
         threads = _param(params, "threads", True)
         if not isinstance(threads, bool):
             raise ConfigError("cloth.threads", f"must be true or false, got {threads!r}")
@@ -806,6 +896,8 @@ class XPBDCloth:
             float(dt),
             self.substeps,
             self.edge_iterations,
+            self.strain_limit,
+            self.limit_passes,
             x_new,
             v_new,
             self._scratch_x,
