@@ -79,7 +79,7 @@ from windbench.wind.boundaries import (
     component_origin,
     padded_shape,
 )
-from windbench.wind.pressure import MultigridPoisson, dot
+from windbench.wind.pressure import MultigridPoisson
 from windbench.wind.primitives import (
     SINK,
     SOURCE,
@@ -525,7 +525,7 @@ class NavierStokesWind(WindField):
         iters, res = self.poisson.solve(
             self.psi, self.rhs, self.tol, self.max_iterations, atol=atol
         )
-        rhs_norm = float(np.sqrt(dot(self.rhs, self.rhs)))
+        rhs_norm = self.poisson.rhs_norm  # ||rhs||_2, computed by the solve
         for a in range(3):
             subtract_gradient(self.q[a], a, self.psi, self.free[a], self.periodic)
             boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], False)

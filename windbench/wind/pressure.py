@@ -268,9 +268,12 @@ def _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, i, j, residual):
 
 @njit(cache=True, parallel=True)
 def residual(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
-    """out = b - A x."""
+    """out = b - A x; returns out . out, summed as :func:`dot` does (in the same pass)."""
+    partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
         _operator_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], True)
+        partial[i] = _plane_dot(out, out, i)
+    return partial.sum()
 
 
 @njit(cache=True, parallel=True)
@@ -619,6 +622,7 @@ class MultigridPoisson:
         self.z = np.zeros(fine.shape) if singular else None  # M r with the constant removed
         self.p = np.zeros(fine.shape)
         self.q = np.zeros(fine.shape)
+        self.rhs_norm = 0.0  # ||b||_2 of the last solve
 
     @property
     def fine(self) -> _Level:
@@ -693,15 +697,16 @@ class MultigridPoisson:
         lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=True)
 
     def solve(self, x, b, tol: float, max_iterations: int, atol: float = 0.0):
-        """Solve A x = b in place from the guess in x; return (iterations, relative residual)."""
+        """Solve A x = b in place from the guess in x; return (iterations, relative residual).
+        ``rhs_norm`` is then ||b||_2 (of b with its mean removed when A is singular)."""
         fine = self.levels[0]
         if self.singular:
             remove_mean(b, self.active)
             remove_mean(x, self.active)
         bnorm = np.sqrt(dot(b, b))
+        self.rhs_norm = float(bnorm)
         r, p, q = self.r, self.p, self.q
-        residual(x, b, *fine.args(), r)
-        rnorm = np.sqrt(dot(r, r))
+        rnorm = np.sqrt(residual(x, b, *fine.args(), r))
         if bnorm == 0.0 or bnorm <= atol:
             x[...] = 0.0
             return 0, 0.0
