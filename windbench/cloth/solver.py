@@ -50,7 +50,8 @@ deformation but not rigid motion, and leaves static equilibria where they are.
 Accuracy. One pass per substep reproduces a constraint's stiffness k once the substep
 resolves it, ``alpha~ >> w |grad C|^2`` (``h << sqrt(m / k)`` per vertex); stiffer
 constraints act as inextensible ones. Real cloth is stiff in stretch (inextensible here:
-less than 5% stretch hanging, tested, with the strain limit's help on fine meshes) and soft in bending (1e-6..1e-4 N m, resolved).
+less than 5% stretch hanging, tested, with the strain limit's help on fine meshes) and
+soft in bending (1e-6..1e-4 N m, resolved).
 Measured: the static sag of a stiff cantilever strip (B = 0.01 N m, 2 cm cells) lies 4%
 above the discrete beam at 512 substeps (a slow test), 8% at 128, 23% at 64. Low bending
 modes are damped mainly by the air (aero.py); the per-constraint damping of step 5 is one
@@ -74,7 +75,8 @@ elimination is one chain of dependent divisions, so a pass costs more than the
 colour-ordered edge sweep, whose independent edges the processor overlaps; but two passes
 over the threads hold the stretch better than four edge passes did, so the default is
 ``cloth.edge_iterations=2``. Measured (``experiments/bench_cloth.py --stretch``, 4 s runs,
-defaults without the strain limit below; the tables are in ``experiments/README.md``): flags in 6 m/s wind 0.9 / 2.0 /
+defaults without the strain limit below; the tables are in ``experiments/README.md``):
+flags in 6 m/s wind 0.9 / 2.0 /
 2.6% median largest edge strain at 40x25 / 64x64 / 100x60 (edge by edge, 4 passes: 5.0 /
 7.2 / 11%), the 40 x 25 flag hanging from its pole 1.6% (was 11-12%), at 3.0 / 12.7 /
 16.1 ms a frame (edge by edge, 4 passes: 2.8 / 10.1 / 17.4 ms). The threads alone do not
@@ -667,6 +669,14 @@ def _param(params, key, default=None):
     return getattr(params, key, default)
 
 
+def _count(params, key: str, default: int) -> int:
+    """The integer >= 1 at ``cloth.<key>``, or a ConfigError naming the key."""
+    value = _param(params, key, default)
+    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+        raise ConfigError(f"cloth.{key}", f"must be an integer >= 1, got {value!r}")
+    return value
+
+
 def _number(value, key: str, positive: bool) -> float:
     try:
         x = float(value)
@@ -711,23 +721,12 @@ class XPBDCloth:
 
     def __init__(self, model: ClothModel, bodies, params):
         self.model = model
-        substeps = _param(params, "substeps", 8)
-        if not isinstance(substeps, int) or isinstance(substeps, bool) or substeps < 1:
-            raise ConfigError("cloth.substeps", f"must be an integer >= 1, got {substeps!r}")
-        self.substeps = substeps
-        iterations = _param(params, "edge_iterations", 2)
-        if not isinstance(iterations, int) or isinstance(iterations, bool) or iterations < 1:
-            raise ConfigError(
-                "cloth.edge_iterations", f"must be an integer >= 1, got {iterations!r}"
-            )
-        self.edge_iterations = iterations
+        self.substeps = _count(params, "substeps", 8)
+        self.edge_iterations = _count(params, "edge_iterations", 2)
         self.strain_limit = _number(
             _param(params, "strain_limit", 0.03), "cloth.strain_limit", False
         )
-        passes = _param(params, "limit_passes", 32)
-        if not isinstance(passes, int) or isinstance(passes, bool) or passes < 1:
-            raise ConfigError("cloth.limit_passes", f"must be an integer >= 1, got {passes!r}")
-        self.limit_passes = passes
+        self.limit_passes = _count(params, "limit_passes", 32)
         threads = _param(params, "threads", True)
         if not isinstance(threads, bool):
             raise ConfigError("cloth.threads", f"must be true or false, got {threads!r}")
