@@ -36,27 +36,43 @@ def _coordinates(a):
     )
 
 
-def _advect(q, a, velocity, cells, periodic, dt, out):
-    """out = q carried over dt by the velocity components (cells per unit time)."""
-    disp = np.full(tuple(n + 2 for n in CELLS) + (3,), np.nan)
-    advection.backtrace(*velocity, cells, periodic, dt, disp)
-    advection.advect(q, a, disp, cells, periodic, out, out, out, False)
+def _advect(q, a, velocity, cells, periodic, dt, out, chunks=2):
+    """out = q (component a) carried over dt by the velocity components (cells per unit
+    time); the other two components carry fields of NaN (they must not leak into a)."""
+    src = [np.full(padded_shape(CELLS, b), np.nan) for b in range(3)]
+    dst = [np.full(padded_shape(CELLS, b), np.nan) for b in range(3)]
+    src[a], dst[a] = q, out
+    advection.advect(
+        *velocity,
+        cells,
+        periodic,
+        dt,
+        chunks,
+        tuple(src),
+        tuple(dst),
+        tuple(dst),
+        tuple(dst),
+        False,
+    )
 
 
 def _q(x, y, z):
     return x * y + 2.0 * z + 1.0
 
 
+@pytest.mark.parametrize("chunks", [1, 3])
 @pytest.mark.parametrize("a", [0, 1, 2])
 @pytest.mark.parametrize("dt", [0.5, -0.4])
-def test_rk2_backtrace_of_a_linear_flow_is_exact(a, dt):
+def test_rk2_backtrace_of_a_linear_flow_is_exact(a, dt, chunks):
+    """Exact for every face, however the planes are split into runs (``chunks``: each run
+    restarts the ring of displacement planes)."""
     velocity = [ALPHA[b] * _coordinates(b)[b] for b in range(3)]
     x, y, z = _coordinates(a)
     q = _q(x, y, z)
     out = np.full_like(q, np.nan)
     cells = np.array(CELLS, dtype=np.int64)
     periodic = np.zeros(3, dtype=np.bool_)
-    _advect(q, a, velocity, cells, periodic, dt, out)
+    _advect(q, a, velocity, cells, periodic, dt, out, chunks)
     back = []
     for b, c in enumerate((x, y, z)):
         mid = c - 0.5 * dt * ALPHA[b] * c

@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import time
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -328,7 +329,6 @@ class NavierStokesWind(WindField):
         # state: the three padded face arrays, pressure (warm start) and work arrays
         self.q = [np.zeros(padded_shape(shape, a)) for a in range(3)]
         self.work = [np.zeros_like(x) for x in self.q]
-        self.disp = np.zeros(tuple(int(n) + 2 for n in shape) + (3,))  # advection.backtrace
         self.work2 = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
         self.qmin = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
         self.qmax = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
@@ -439,31 +439,24 @@ class NavierStokesWind(WindField):
         for a in range(3):
             boundaries.fill_boundary(arrays[a], a, self.kinds, self.planes[a], True)
 
-    def _carry(self, src, a, out, qmin=None, qmax=None):
-        """out = src(x - d) for component a, d the displacements in ``self.disp``; with
-        qmin/qmax also the limiter's bounds."""
-        bounds = qmin is not None
+    def _carry(self, dt_h, src, out, bounds=False):
+        """out[a] = src[a](x - d) for the three components, d the backtrace of the current
+        velocity over dt_h = dt / h; with ``bounds`` also the limiter's qmin/qmax."""
+        qmin, qmax = (self.qmin, self.qmax) if bounds else (out, out)
         advection.advect(
-            src, a, self.disp, self.cells, self.periodic, out,
-            qmin if bounds else out, qmax if bounds else out, bounds,
+            *self.q, self.cells, self.periodic, dt_h, numba.get_num_threads(),
+            tuple(src), tuple(out), tuple(qmin), tuple(qmax), bounds,
         )  # fmt: skip
-
-    def _backtrace(self, dt_h):
-        advection.backtrace(*self.q, self.cells, self.periodic, dt_h, self.disp)
 
     def _advect(self, dt):
         dt_h = dt / self.h
-        self._backtrace(dt_h)
         if self.advection == "semi_lagrangian":
-            for a in range(3):
-                self._carry(self.q[a], a, self.work[a])
+            self._carry(dt_h, self.q, self.work)
         else:
-            for a in range(3):
-                self._carry(self.q[a], a, self.work2[a], self.qmin[a], self.qmax[a])
+            self._carry(dt_h, self.q, self.work2, bounds=True)
             self._fill(self.work2)
-            self._backtrace(-dt_h)  # the back step moves the same velocity field backwards
+            self._carry(-dt_h, self.work2, self.work)  # the same velocity, backwards
             for a in range(3):
-                self._carry(self.work2[a], a, self.work[a])
                 advection.maccormack_correct(
                     self.q[a], self.work2[a], self.work[a], self.qmin[a], self.qmax[a], self.work[a]
                 )
