@@ -4,11 +4,13 @@ Backward Euler for du/dt = nu lap u on the MAC faces:
 
     (1 + 6 alpha) q_f - alpha sum_{6 neighbours} q_nb = q0_f,   alpha = nu dt / h^2,
 
-solved by red-black Gauss-Seidel until the error bound of a contraction, rho / (1 - rho)
+solved by one Jacobi sweep from q0 out of place (:func:`jacobi_first_sweep`: it also finds
+the field's scale, so the right-hand side needs no copy pass; at air's viscosity that
+sweep is usually the only one), then red-black Gauss-Seidel until the error bound of a contraction, rho / (1 - rho)
 times the largest update of the last sweep, is below ``tol`` times the field's scale:
 the Jacobi factor rho = 2 alpha d / (1 + 2 alpha d) (d active axes) bounds the max-norm
 contraction of a Gauss-Seidel sweep on this diagonally dominant M-matrix
-(:func:`error_bound_factor`). The ghost layer carries the boundary conditions (no-slip:
+(:func:`error_bound_factor`), and is exactly the Jacobi sweep's. The ghost layer carries the boundary conditions (no-slip:
 ghost = 2 U_wall - interior, i.e. the wall value sits on the wall; slip/outflow: zero
 normal gradient), and is refilled after every half sweep so the boundary condition is
 implicit too. Faces whose value is prescribed (normal faces on walls and inflow, faces
@@ -18,6 +20,8 @@ touching a body, cloth-blocked faces) are not updated. Unconditionally stable: t
 from __future__ import annotations
 
 from numba import njit, prange
+
+from windbench.wind.flags import FAST_MATH
 
 
 def error_bound_factor(alpha: float, active_axes: int) -> float:
@@ -48,16 +52,7 @@ def _plane(q, q0, I, colour, alpha, axes, free):
             if not fc[K]:
                 continue
             # q = (q0 + alpha sum nb) / (1 + 2 alpha d), d = number of active axes
-            if all_axes:
-                nb = (xm[K] + xp[K]) + (ym[K] + yp[K]) + (qc[K - 1] + qc[K + 1])
-            else:
-                nb = 0.0
-                if axes[0]:
-                    nb += xm[K] + xp[K]
-                if axes[1]:
-                    nb += ym[K] + yp[K]
-                if axes[2]:
-                    nb += qc[K - 1] + qc[K + 1]
+            nb = _neighbour_sum(xm, xp, ym, yp, qc, K, axes, all_axes)
             new = (q0c[K] + alpha * nb) * inv
             change = max(change, abs(new - qc[K]))
             qc[K] = new
@@ -75,3 +70,51 @@ def gauss_seidel_half(q, q0, colour, alpha, axes, free, changes):
     """
     for I in prange(1, q.shape[0] - 1):
         changes[I] = _plane(q, q0, I, colour, alpha, axes, free)
+
+
+@njit(cache=True, inline="always")
+def _neighbour_sum(xm, xp, ym, yp, qc, K, axes, all_axes):
+    """sum of the neighbours of face K along the active axes (all three: branch-free)."""
+    if all_axes:
+        return (xm[K] + xp[K]) + (ym[K] + yp[K]) + (qc[K - 1] + qc[K + 1])
+    nb = 0.0
+    if axes[0]:
+        nb += xm[K] + xp[K]
+    if axes[1]:
+        nb += ym[K] + yp[K]
+    if axes[2]:
+        nb += qc[K - 1] + qc[K + 1]
+    return nb
+
+
+@njit(cache=True, parallel=True, fastmath=FAST_MATH)
+def jacobi_first_sweep(q0, out, alpha, axes, free, changes, peaks):
+    """The first sweep from the guess q0 (the right-hand side itself), out of place:
+    out = (q0 + alpha sum_nb q0) / (1 + 2 alpha d) on the free faces, out = q0 on every
+    other element (prescribed faces, ghosts: refill them from out afterwards).
+    ``changes[I]``: the largest update in padded plane I; ``peaks[I]``: the largest |q0|
+    there (the field's scale for the stopping test). The inner rows' loop has no branch
+    (a select keeps prescribed faces), so it vectorises."""
+    P0, P1, P2 = q0.shape
+    inv = 1.0 / (1.0 + 2.0 * alpha * (axes[0] + axes[1] + axes[2]))
+    all_axes = axes[0] != 0 and axes[1] != 0 and axes[2] != 0
+    for I in prange(P0):
+        change, peak = 0.0, 0.0
+        for J in range(P1):
+            qc, oc, fc = q0[I, J], out[I, J], free[I, J]
+            if not (0 < I < P0 - 1 and 0 < J < P1 - 1):  # a ghost row: copied
+                for K in range(P2):
+                    oc[K] = qc[K]
+                    peak = max(peak, abs(qc[K]))
+                continue
+            xm, xp, ym, yp = q0[I - 1, J], q0[I + 1, J], q0[I, J - 1], q0[I, J + 1]
+            for K in (0, P2 - 1):
+                oc[K] = qc[K]
+                peak = max(peak, abs(qc[K]))
+            for K in range(1, P2 - 1):
+                nb = _neighbour_sum(xm, xp, ym, yp, qc, K, axes, all_axes)
+                new = (qc[K] + alpha * nb) * inv if fc[K] else qc[K]
+                oc[K] = new
+                change = max(change, abs(new - qc[K]))
+                peak = max(peak, abs(qc[K]))
+        changes[I], peaks[I] = change, peak
