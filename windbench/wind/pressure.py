@@ -90,6 +90,7 @@ FINE_OMEGA = 1.0
 # sweep: the 128^3 levels do not fit in the cache. The face weights are exact in float32
 # (0, 1 and means of them times powers of 1/4).
 PRECONDITIONER_DTYPE = np.float32
+NO_DOT = np.zeros((0, 0, 0))  # the smoother's r when no dot is wanted (:func:`gauss_seidel`)
 
 
 # Row classes (:func:`classify_rows`): the kernels treat each row (i, j, :) by its class.
@@ -385,7 +386,9 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
 
 
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)
-def gauss_seidel(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, colour, halves):
+def gauss_seidel(
+    x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, colour, halves, r, partial
+):
     """``halves`` half sweeps of red-black SOR (the level's omega, coef[6]) on A x = b,
     alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first), planes
     in parallel: a cycle's smoothing on one level is one call (the Python loop of one call per half
@@ -393,15 +396,27 @@ def gauss_seidel(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, colour,
 
     On a periodic x axis with an odd number of planes the last plane neighbours the first
     one in the same colour: it is done after the parallel loop (no race, bit-reproducible).
+
+    With ``partial`` of one entry per plane (else empty): returns r . x after the last
+    half sweep, each plane's share taken as soon as that sweep has finished the plane
+    (no other plane writes it), summed by planes in order as :func:`dot` does: CG's r . M r
+    without a pass of its own (0.13 ms per iteration at 64^3).
     """
     nx = x.shape[0]
     last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
+    with_dot = partial.shape[0] == nx
     for half in range(halves):
         c = (colour + half) % 2
+        final = with_dot and half == halves - 1
         for i in prange(last):
             _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
+            if final:
+                partial[i] = _plane_dot(r, x, i)
         for i in range(last, nx):
             _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
+            if final:
+                partial[i] = _plane_dot(r, x, i)
+    return partial.sum() if with_dot else 0.0
 
 
 @njit(cache=True, parallel=True)
@@ -573,6 +588,7 @@ class _Level:
         self.ends = np.zeros((nx, ny, 2, 7), dtype)
         # small levels run in one compiled call per visit (:mod:`.coarse_levels`)
         self.small = np.prod(self.shape) < SERIAL_CELLS
+        self.partial = np.zeros(nx)  # per-plane sums of the smoother's dot
 
     def args(self):
         w, p = self.w, self.periodic
@@ -583,9 +599,11 @@ class _Level:
         the compact table of the rows' end-cell weights."""
         classify_rows(*self.w, self.coef, self.periodic, self.rows, self.row_coef, self.ends)
 
-    def smooth(self, x, b, sweeps, reverse):
-        """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call)."""
-        gauss_seidel(x, b, *self.args(), 1 if reverse else 0, 2 * sweeps)
+    def smooth(self, x, b, sweeps, reverse, r=None) -> float:
+        """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call); with
+        ``r`` (float64, the level's shape) returns r . x after them (:func:`gauss_seidel`)."""
+        r, partial = (NO_DOT, NO_DOT) if r is None else (r, self.partial)
+        return gauss_seidel(x, b, *self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
 
 
 class MultigridPoisson:
@@ -673,19 +691,21 @@ class MultigridPoisson:
         float64 copy with the constant removed."""
         fine = self.levels[0]
         fine.x[...] = 0.0
-        self._cycle(0)
         if not self.singular:
-            return dot(r, fine.x), fine.x
+            rz = self._cycle(0, r)
+            return (dot(r, fine.x) if rz is None else rz), fine.x
+        self._cycle(0)
         cast_copy(fine.x, self.z)
         remove_mean(self.z, self.active)
         return dot(r, self.z), self.z
 
-    def _cycle(self, n: int):
+    def _cycle(self, n: int, r=None):
         """Level n from its current guess: smooth, correct from level n + 1 (twice on the
-        W_LEVELS, each time from the coarse guess so far), smooth in reverse order."""
+        W_LEVELS, each time from the coarse guess so far), smooth in reverse order. With
+        ``r``, returns r . x from the last sweep (None where level n is a small level)."""
         if n == self.first_small:  # this level and those below: one compiled call
             self.small.cycle()
-            return
+            return None
         lev = self.levels[n]
         nxt = self.levels[n + 1]
         lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
@@ -694,7 +714,7 @@ class MultigridPoisson:
         for _ in range(2 if n in W_LEVELS else 1):
             self._cycle(n + 1)
         prolong_add(nxt.x, lev.ratio, lev.x)
-        lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=True)
+        return lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=True, r=r)
 
     def solve(self, x, b, tol: float, max_iterations: int, atol: float = 0.0):
         """Solve A x = b in place from the guess in x; return (iterations, relative residual).
