@@ -13,7 +13,8 @@ One step of ``dt`` (operator splitting, each operator in its own module):
 3. advection (:mod:`.advection`): semi-Lagrangian with an RK2 backtrace (once per cell
    centre, faces take the mean of their two cells' displacements), or limited
    MacCormack (``wind.advection``);
-4. implicit diffusion with kinematic viscosity ``wind.viscosity`` (:mod:`.diffusion`);
+4. implicit diffusion with kinematic viscosity ``wind.viscosity`` (:mod:`.diffusion`: a
+   Jacobi sweep from the advected field, then Gauss-Seidel until the error bound);
 5. pressure projection to the relative residual ``wind.pressure_tol`` (:mod:`.pressure`,
    multigrid-preconditioned CG whose iteration count does not grow with resolution).
 
