@@ -8,9 +8,9 @@ backtrace displacement d given by the second-order midpoint rule (RK2)
 
 and q(x - d) interpolated trilinearly in q's padded lattice (ghost layer filled by
 :mod:`windbench.wind.boundaries`). The displacement is computed once per cell centre
-(:func:`_backtrace_plane`: u(x) the mean of the cell's two faces per axis, u(x_mid) interpolated
-from the staggered components) and every face takes the mean of the displacements of the
-two cells it separates (:func:`advect`). For a linear velocity field this is exactly the
+(:func:`_backtrace_plane`: u(x) the mean of the cell's two faces per axis, u(x_mid)
+interpolated from the staggered components) and every face takes the mean of the
+displacements of the two cells it separates (:func:`advect`). For a linear velocity field this is exactly the
 RK2 backtrace of the face itself (d is then linear in x; tested); for a smooth one it
 differs from it by O(h^2), so the scheme stays second order in space and time. Backtraced
 points leaving the domain are wrapped on periodic axes and clamped onto the boundary
@@ -28,8 +28,9 @@ three per cell, about one per face, and the face step is one interpolation of q 
 two-point mean: 25 ns per face (measured A/B in one process, the same grid and field).
 The three components are carried in one pass over the planes, the displacements kept in
 a two-plane ring per thread rather than stored as a field (:func:`advect`): the same bits,
-advection 11.6 -> 10.6 ms per step at 64^3 and 58.3 -> 51.9 ms at 128^3 (two threads,
-median of 10 and 4 steps, A/B in one process), and three float64 values per cell less.
+advection 11.7 -> 10.7 ms per step at 64^3 and 83.9 -> 72.9 ms at 128^3 (two threads,
+medians over 28 and 14 steps of the fence, the two versions side by side in one
+process), and three float64 values per cell less.
 """
 
 from __future__ import annotations
@@ -220,6 +221,15 @@ def _carry_row(q, a, I, J, lo, hi, Jm, cells, periodic, out, qmin, qmax, bounds)
             qmax[I, J, K] = qhi
 
 
+@njit(cache=True, inline="always")
+def _carry_plane(q, a, I, lo, hi, cells, periodic, out, qmin, qmax, bounds):
+    """:func:`_carry_row` over the rows J of plane I of component a's faces; a v-face (a =
+    1) separates the cells of rows J - 1 and J of one plane, the others cells of one row."""
+    e1 = int(a == 1)
+    for J in range(1, q.shape[1] - 1):
+        _carry_row(q, a, I, J, lo, hi, J - e1, cells, periodic, out, qmin, qmax, bounds)
+
+
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)
 def advect(u, v, w, cells, periodic, dt_h, chunks, src, out, qmin, qmax, bounds):
     """out[a] = src[a](x - d) at every interior face of component a = 0, 1, 2 (tuples of
@@ -235,52 +245,22 @@ def advect(u, v, w, cells, periodic, dt_h, chunks, src, out, qmin, qmax, bounds)
     three times before; same bits). ``bounds``: also store in qmin[a]/qmax[a] the min/max
     of the eight values each face was interpolated from (the MacCormack limiter).
     """
-    n1 = cells[1]
     planes = cells[0] + 1
     chunks = max(1, min(chunks, planes))
     for c in prange(chunks):
         start = 1 + (c * planes) // chunks
         end = 1 + ((c + 1) * planes) // chunks
-        ring = np.empty((2, n1 + 2, cells[2] + 2, 3))
+        ring = np.empty((2, cells[1] + 2, cells[2] + 2, 3))
         _backtrace_plane(u, v, w, start - 1, cells, periodic, dt_h, ring[(start - 1) % 2])
         for I in range(start, end):
             hi = ring[I % 2]
             lo = ring[(I - 1) % 2]
             _backtrace_plane(u, v, w, I, cells, periodic, dt_h, hi)
-            for J in range(1, n1 + 1):
-                _carry_row(
-                    src[0], 0, I, J, lo, hi, J, cells, periodic, out[0], qmin[0], qmax[0], bounds
+            _carry_plane(src[0], 0, I, lo, hi, cells, periodic, out[0], qmin[0], qmax[0], bounds)
+            if I < planes:  # the v- and w-faces of cell plane I
+                _carry_plane(
+                    src[1], 1, I, hi, hi, cells, periodic, out[1], qmin[1], qmax[1], bounds
                 )
-            if I < planes:
-                for J in range(1, n1 + 2):
-                    _carry_row(
-                        src[1],
-                        1,
-                        I,
-                        J,
-                        hi,
-                        hi,
-                        J - 1,
-                        cells,
-                        periodic,
-                        out[1],
-                        qmin[1],
-                        qmax[1],
-                        bounds,
-                    )
-                for J in range(1, n1 + 1):
-                    _carry_row(
-                        src[2],
-                        2,
-                        I,
-                        J,
-                        hi,
-                        hi,
-                        J,
-                        cells,
-                        periodic,
-                        out[2],
-                        qmin[2],
-                        qmax[2],
-                        bounds,
-                    )
+                _carry_plane(
+                    src[2], 2, I, hi, hi, cells, periodic, out[2], qmin[2], qmax[2], bounds
+                )

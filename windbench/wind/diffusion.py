@@ -4,13 +4,14 @@ Backward Euler for du/dt = nu lap u on the MAC faces:
 
     (1 + 6 alpha) q_f - alpha sum_{6 neighbours} q_nb = q0_f,   alpha = nu dt / h^2,
 
-solved by one Jacobi sweep from q0 out of place (:func:`jacobi_first_sweep`: it also finds
-the field's scale, so the right-hand side needs no copy pass; at air's viscosity that
-sweep is usually the only one), then red-black Gauss-Seidel until the error bound of a contraction, rho / (1 - rho)
-times the largest update of the last sweep, is below ``tol`` times the field's scale:
-the Jacobi factor rho = 2 alpha d / (1 + 2 alpha d) (d active axes) bounds the max-norm
-contraction of a Gauss-Seidel sweep on this diagonally dominant M-matrix
-(:func:`error_bound_factor`), and is exactly the Jacobi sweep's. The ghost layer carries the boundary conditions (no-slip:
+solved by one Jacobi sweep from q0 out of place (:func:`jacobi_first_sweep`: it also
+finds the field's scale, so the right-hand side needs no copy pass; at air's viscosity
+it is the only sweep up to 64^3 cells of the scaling scene), then red-black Gauss-Seidel
+until the error bound of a contraction, rho / (1 - rho) times the largest update of the
+last sweep, is below ``tol`` times the field's scale: the Jacobi factor rho = 2 alpha d /
+(1 + 2 alpha d) (d active axes) is the max-norm contraction of the Jacobi sweep and
+bounds that of a Gauss-Seidel sweep on this diagonally dominant M-matrix
+(:func:`error_bound_factor`). The ghost layer carries the boundary conditions (no-slip:
 ghost = 2 U_wall - interior, i.e. the wall value sits on the wall; slip/outflow: zero
 normal gradient), and is refilled after every half sweep so the boundary condition is
 implicit too. Faces whose value is prescribed (normal faces on walls and inflow, faces
@@ -93,8 +94,7 @@ def jacobi_first_sweep(q0, out, alpha, axes, free, changes, peaks):
     out = (q0 + alpha sum_nb q0) / (1 + 2 alpha d) on the free faces, out = q0 on every
     other element (prescribed faces, ghosts: refill them from out afterwards).
     ``changes[I]``: the largest update in padded plane I; ``peaks[I]``: the largest |q0|
-    there (the field's scale for the stopping test). The inner rows' loop has no branch
-    (a select keeps prescribed faces), so it vectorises."""
+    there (the field's scale for the stopping test)."""
     P0, P1, P2 = q0.shape
     inv = 1.0 / (1.0 + 2.0 * alpha * (axes[0] + axes[1] + axes[2]))
     all_axes = axes[0] != 0 and axes[1] != 0 and axes[2] != 0
