@@ -4,6 +4,7 @@ known without the code (analytic solutions, conservation of volume, symmetry).""
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 import xarray as xr
@@ -268,15 +269,26 @@ def test_cloth_sheet_shelters_with_projection_coupling(mode):
 
 
 def test_same_input_same_numbers_bit_for_bit():
+    """Twice on all threads and once on one thread: the same bits (every sum of the
+    solver is taken in an order that does not depend on the threads)."""
     boundary, sources, bodies, _ = CASES["inflow_outflow_body"]
     runs = []
-    for _ in range(2):
-        wind = make(
-            box_scene(boundary, sources, bodies), 12, advection="maccormack", coupling="projection"
-        )
-        for _ in range(3):
-            wind.step(0.05, sheet_obstacles())
-        runs.append(wind.velocity().copy())
+    all_threads = numba.get_num_threads()
+    try:
+        for threads in (all_threads, 1, all_threads):
+            numba.set_num_threads(threads)
+            wind = make(
+                box_scene(boundary, sources, bodies),
+                12,
+                advection="maccormack",
+                coupling="projection",
+            )
+            for _ in range(3):
+                wind.step(0.05, sheet_obstacles())
+            runs.append(wind.velocity().copy())
+    finally:
+        numba.set_num_threads(all_threads)
+    assert np.array_equal(runs[0], runs[2])
     assert np.array_equal(runs[0], runs[1])
 
 

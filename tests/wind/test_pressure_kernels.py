@@ -92,7 +92,7 @@ def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega
     lev = _level(rng, periodic, omega=omega)
     x0, b = rng.random(SHAPE), rng.random(SHAPE)
     x = x0.copy()
-    no_dot = (pressure.NO_DOT, pressure.NO_DOT)
+    no_dot = pressure.NO_DOT
     pressure.gauss_seidel(x, b, *lev.args(), 0, 1, *no_dot)  # one red half sweep
     diag = sum(  # sum_f w_f: the diagonal of A
         np.take(lev.w[a], np.arange(SHAPE[a]) + s, axis=a) for a in range(3) for s in (0, 1)

@@ -90,7 +90,8 @@ FINE_OMEGA = 1.0
 # sweep: the 128^3 levels do not fit in the cache. The face weights are exact in float32
 # (0, 1 and means of them times powers of 1/4).
 PRECONDITIONER_DTYPE = np.float32
-NO_DOT = np.zeros((0, 0, 0))  # the smoother's r when no dot is wanted (:func:`gauss_seidel`)
+# the smoother's (r, partial) when no dot is wanted (:func:`gauss_seidel`)
+NO_DOT = (np.zeros((0, 0, 0)), np.zeros(0))
 
 
 # Row classes (:func:`classify_rows`): the kernels treat each row (i, j, :) by its class.
@@ -274,7 +275,7 @@ def residual(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
     for i in prange(x.shape[0]):
         _operator_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], True)
         partial[i] = _plane_dot(out, out, i)
-    return partial.sum()
+    return ordered_sum(partial)
 
 
 @njit(cache=True, parallel=True)
@@ -285,7 +286,7 @@ def apply_operator(x, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
     for i in prange(x.shape[0]):
         _operator_plane(x, x, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], False)
         partial[i] = _plane_dot(x, out, i)
-    return partial.sum()
+    return ordered_sum(partial)
 
 
 @njit(cache=True, fastmath=FAST_MATH)
@@ -416,7 +417,7 @@ def gauss_seidel(
             _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
             if final:
                 partial[i] = _plane_dot(r, x, i)
-    return partial.sum() if with_dot else 0.0
+    return ordered_sum(partial) if with_dot else 0.0
 
 
 @njit(cache=True, parallel=True)
@@ -488,6 +489,18 @@ def coarsen_weights(fine, a, ratio, coarse):
                 coarse[I, J, K] = acc * inv
 
 
+@njit(cache=True)
+def ordered_sum(partial):
+    """sum of ``partial`` from the first entry to the last. Inside a parallel kernel numba
+    turns ``partial.sum()`` into a reduction split over the threads, whose rounding then
+    depends on the thread count (1e-12 apart between one and two threads); a plain loop
+    in a function of its own stays serial."""
+    total = 0.0
+    for i in range(partial.shape[0]):
+        total += partial[i]
+    return total
+
+
 @njit(cache=True, inline="always")
 def _plane_dot(a, b, i):
     """sum a[i] b[i] over plane i, rows in order."""
@@ -504,7 +517,7 @@ def dot(a, b):
     partial = np.empty(a.shape[0])
     for i in prange(a.shape[0]):
         partial[i] = _plane_dot(a, b, i)
-    return partial.sum()
+    return ordered_sum(partial)
 
 
 @njit(cache=True, parallel=True)
@@ -523,7 +536,7 @@ def cg_update(alpha, p, q, x, r, r_low):
                 r_low[i, j, k] = rr
                 acc += rr * rr
         partial[i] = acc
-    return partial.sum()
+    return ordered_sum(partial)
 
 
 @njit(cache=True, parallel=True)
@@ -602,7 +615,7 @@ class _Level:
     def smooth(self, x, b, sweeps, reverse, r=None) -> float:
         """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call); with
         ``r`` (float64, the level's shape) returns r . x after them (:func:`gauss_seidel`)."""
-        r, partial = (NO_DOT, NO_DOT) if r is None else (r, self.partial)
+        r, partial = NO_DOT if r is None else (r, self.partial)
         return gauss_seidel(x, b, *self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
 
 
