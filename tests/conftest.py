@@ -31,8 +31,9 @@ def run_config(tmp_path):
 def cli(tmp_path):
     """cli(*args) -> CompletedProcess of ``python -m windbench`` with output under tmp_path."""
 
-    def _cli(*args, cwd=None):
-        env = {**os.environ, "PYTHONPATH": str(ROOT), "HYDRA_FULL_ERROR": "0"}
+    def _cli(*args, cwd=None, pythonpath=None):
+        path = os.pathsep.join(str(p) for p in (ROOT, pythonpath) if p)
+        env = {**os.environ, "PYTHONPATH": path, "HYDRA_FULL_ERROR": "0"}
         return subprocess.run(
             [sys.executable, "-m", "windbench", *args],
             capture_output=True,

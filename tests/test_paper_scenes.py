@@ -6,12 +6,12 @@ The ``global`` case (no lee, ratio > 0.8) is in tests/cloth/test_cloth_scenes.py
 
 import pytest
 
-from windbench.wind import BACKENDS
+from windbench.wind import backends
 
 LEE_BOUND = {"particles": 0.1, "navier_stokes": 0.3}  # issue: sheltered / exposed force
 
 
-@pytest.mark.parametrize("backend", sorted(b for b in LEE_BOUND if b in BACKENDS))
+@pytest.mark.parametrize("backend", sorted(b for b in LEE_BOUND if b in backends()))
 def test_the_flag_behind_the_wall_is_sheltered(run_config, backend):
     _, ds = run_config(
         [

@@ -83,10 +83,12 @@ def test_cli_bad_input_exits_2_with_one_line_and_writes_no_dataset(cli, tmp_path
 
 def test_cli_unknown_scene_and_key_list_the_choices(cli):
     proc = cli("scene=moon")
-    assert proc.returncode != 0 and "Available options in 'scene'" in proc.stderr
-    assert "fence" in proc.stderr
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1
+    assert proc.stderr.startswith("windbench: error: scene: no config 'moon'; allowed [")
+    assert "'fence'" in proc.stderr and "scene_schema" not in proc.stderr
     proc = cli("grid.cells=8")
-    assert proc.returncode != 0 and "cells" in proc.stderr
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1
+    assert proc.stderr.startswith("windbench: error: grid.cells: Key 'cells' not in 'GridConfig'")
 
 
 def test_smoke_experiment_runs_from_the_command_line(cli, tmp_path):

@@ -169,9 +169,9 @@ def assert_same_numbers(a: xr.Dataset, b: xr.Dataset):
 
 @pytest.mark.parametrize("scene", ["two_flags_wall"])
 def test_same_config_and_seed_reproduce_every_number(run_config, scene):
-    from windbench.wind import BACKENDS
+    from windbench.wind import backends
 
-    for backend in BACKENDS:
+    for backend in backends():
         args = [
             f"wind={backend}",
             f"scene={scene}",

@@ -1,8 +1,9 @@
 """Structured configs: the schema Hydra checks every run against (types and known keys).
 
-The ConfigStore holds ``windbench_schema`` (the root) and one schema per wind backend in
-group ``wind`` (``<backend>_schema``); each ``conf/wind/<backend>.yaml`` starts from its
-schema, so a wrong type or an unknown key fails at composition, before any work.
+The ConfigStore holds ``windbench_schema`` (the root) and ``scene_schema``; each wind
+backend declares and registers its own schema beside its code
+(:func:`windbench.wind.registry.register_backend`), so a wrong type or an unknown key
+fails at composition, before any work.
 """
 
 from __future__ import annotations
@@ -54,48 +55,6 @@ class SceneConfig:
     probes: dict[str, ProbeBoxConfig] = field(default_factory=dict)
     lee_force: LeeForceConfig | None = None
     reference_speed: float | None = None
-
-
-@dataclass
-class WindConfig:
-    """Keys every backend has; backends subclass this with their own."""
-
-    name: str = MISSING
-
-
-@dataclass
-class GlobalWindConfig(WindConfig):
-    name: str = "global"
-
-
-@dataclass
-class NavierStokesWindConfig(WindConfig):
-    """Stable fluids (paper §4.1); see windbench.wind.navier_stokes."""
-
-    name: str = "navier_stokes"
-    advection: str = "semi_lagrangian"  # semi_lagrangian | maccormack
-    viscosity: float = 1.5e-5  # kinematic, m^2/s (air)
-    pressure_tol: float = 1e-6  # relative residual of the projection
-    pressure_max_iterations: int = 200
-    diffusion_tol: float = 1e-8  # bound on the implicit solve's max error / velocity scale
-    source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
-    coupling: str = "paper"  # none | paper | projection (paper §4.1.2)
-    body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
-
-
-@dataclass
-class ParticleWindConfig(WindConfig):
-    """Backend ``particles`` (paper §4.2.2); see windbench.wind.particles and .emission."""
-
-    name: str = "particles"
-    particles_per_second: float | None = None  # per source; null: particles_per_cell rule
-    particles_per_cell: float = 2.0  # automatic rate: new particles per emitter cell per memory
-    max_particles: int = 1_000_000  # cap on live particles (all sources)
-    max_age: float = 10.0  # s; older particles die
-    memory: float = 0.1  # s; a cell keeps a source's wind this long after its last particle
-    max_hits: int = 8  # collisions per particle per step before it waits for the next step
-    deflected_cells: str = "bodies"  # which hits make later marks w - (n.w) n: all|bodies|none
-    seed: int = 0  # conf/wind/particles.yaml sets ${seed}
 
 
 @dataclass
@@ -173,16 +132,7 @@ class WindbenchConfig:
     experiment: str | None = None
 
 
-WIND_SCHEMAS: dict[str, type] = {
-    "global": GlobalWindConfig,
-    "navier_stokes": NavierStokesWindConfig,
-    "particles": ParticleWindConfig,
-}
-
-
 def register_configs() -> None:
     cs = ConfigStore.instance()
     cs.store(name="windbench_schema", node=WindbenchConfig)
     cs.store(group="scene", name="scene_schema", node=SceneConfig)
-    for backend, schema in WIND_SCHEMAS.items():
-        cs.store(group="wind", name=f"{backend}_schema", node=schema)

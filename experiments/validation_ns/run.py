@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from windbench.wind.ns_problems import free_stream, poiseuille, taylor_green
+from experiments.validation_ns.problems import free_stream, poiseuille, taylor_green
 
 OUT = Path(__file__).resolve().parent / "results"
 

@@ -1,27 +1,25 @@
 """Wind backends behind one interface (:class:`windbench.wind.base.WindField`).
 
-``BACKENDS`` maps the ``wind`` config group's names to ``module:Class``; modules are
-imported only when chosen, so adding a backend is one line here plus its config schema.
+Each backend registers itself with its config schema (:mod:`windbench.wind.registry`);
+:func:`make_wind` builds the one a run's ``wind`` config names.
 """
 
 from __future__ import annotations
 
-import importlib
+from windbench.wind.registry import (
+    WindConfig,
+    backends,
+    discover,
+    get_backend,
+    register_backend,
+)
 
-from windbench.errors import ConfigError
-
-BACKENDS: dict[str, str] = {
-    "global": "windbench.wind.global_field:GlobalWind",
-    "navier_stokes": "windbench.wind.navier_stokes:NavierStokesWind",
-    "particles": "windbench.wind.particles:ParticleWind",
-}
+__all__ = ["WindConfig", "backend_class", "backends", "discover", "make_wind", "register_backend"]
 
 
 def backend_class(name: str):
-    if name not in BACKENDS:
-        raise ConfigError("wind", f"unknown backend {name!r}; allowed {sorted(BACKENDS)}")
-    module, cls = BACKENDS[name].split(":")
-    return getattr(importlib.import_module(module), cls)
+    """The WindField class registered as ``name`` (ConfigError if there is none)."""
+    return get_backend(name).cls
 
 
 def make_wind(params, scene, grid):

@@ -8,14 +8,25 @@ and ``sample`` evaluates the primitives exactly at the query points (no interpol
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from windbench.wind.base import Obstacles, WindField
 from windbench.wind.primitives import parameter_table, superpose
+from windbench.wind.registry import WindConfig, register_backend
 
 
+@dataclass
+class GlobalConfig(WindConfig):
+    """``wind.*`` keys of the global field: none but the name."""
+
+    name: str = "global"
+
+
+@register_backend("global", config=GlobalConfig)
 class GlobalWind(WindField):
-    name = "global"
+    """w = sum_i w_i everywhere, whatever the obstacles (module docstring)."""
 
     def __init__(self, scene, grid, params):
         super().__init__(scene, grid, params)

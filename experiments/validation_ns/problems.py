@@ -1,5 +1,5 @@
 """Validation problems of the navier_stokes backend with known answers (paper §4.1):
-shared by the tests (``tests/wind/test_navier_stokes.py``, small sizes) and the study
+shared by the tests (``tests/wind/navier_stokes/test_validation.py``, small sizes) and the study
 ``experiments/validation_ns/run.py`` (refinement series).
 
 - :func:`taylor_green`: 2D Taylor-Green vortex in a periodic box (L = 2 pi, U = 1),
@@ -15,12 +15,11 @@ from __future__ import annotations
 import numpy as np
 from omegaconf import OmegaConf
 
-from windbench.config import NavierStokesWindConfig
 from windbench.grid import Grid
 from windbench.scenes import build_scene
 from windbench.wind.base import Obstacles
-from windbench.wind.boundaries import FACE_NAMES
-from windbench.wind.navier_stokes import NavierStokesWind
+from windbench.wind.navier_stokes import NavierStokesConfig, NavierStokesWind
+from windbench.wind.navier_stokes.boundaries import FACE_NAMES
 
 NONE = Obstacles.rigid_only(())
 
@@ -29,7 +28,7 @@ def backend(spec, resolution, **params) -> NavierStokesWind:
     """The backend on the scene ``spec`` (a scene config dict) with ``params`` overrides."""
     scene = build_scene(spec)
     grid = Grid.from_domain(scene.lower, scene.upper, resolution)
-    return NavierStokesWind(scene, grid, OmegaConf.structured(NavierStokesWindConfig(**params)))
+    return NavierStokesWind(scene, grid, OmegaConf.structured(NavierStokesConfig(**params)))
 
 
 def taylor_green(n, scheme, dt, duration=1.0, nu=0.05):

@@ -16,7 +16,7 @@ from windbench.grid import Grid
 from windbench.scenes import build_scene
 from windbench.wind.base import Obstacles
 from windbench.wind.particles import ParticleWind
-from windbench.wind.tracing import TRIANGLES, convex_first_hit, sort_by_cell
+from windbench.wind.particles.tracing import TRIANGLES, convex_first_hit, sort_by_cell
 
 
 @pytest.fixture(scope="module")

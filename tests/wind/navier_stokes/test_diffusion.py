@@ -1,4 +1,4 @@
-"""The diffusion kernels against a discrete eigenmode (:mod:`windbench.wind.diffusion`).
+"""The diffusion kernels against a discrete eigenmode (:mod:`windbench.wind.navier_stokes.diffusion`).
 
 On a periodic lattice the product of cosines q0 = prod_b cos(theta_b i_b) is an
 eigenvector of the neighbour sum: sum_nb q0 = (sum_b 2 cos theta_b) q0 over the active
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from windbench.wind import diffusion
+from windbench.wind.navier_stokes import diffusion
 
 SHAPE = (8, 6, 5)
 ALPHA = 0.3

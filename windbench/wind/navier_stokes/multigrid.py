@@ -63,8 +63,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from windbench.wind.coarse_levels import CoarseLevels
-from windbench.wind.flags import FAST_MATH
+from windbench.wind.navier_stokes.coarse_levels import CoarseLevels
+from windbench.wind.navier_stokes.flags import FAST_MATH
 
 SERIAL_CELLS = 32768  # levels with fewer cells run on one thread (:mod:`.coarse_levels`)
 PRE_SWEEPS = 2  # per level and direction

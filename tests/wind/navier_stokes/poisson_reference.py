@@ -1,5 +1,5 @@
 """The pressure operator written out with numpy: the reference the pressure kernels
-(:mod:`windbench.wind.pressure`, :mod:`windbench.wind.coarse_levels`) are tested against."""
+(:mod:`windbench.wind.navier_stokes.multigrid`, :mod:`windbench.wind.navier_stokes.coarse_levels`) are tested against."""
 
 from __future__ import annotations
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from numba import njit, prange
 
-from windbench.wind.flags import FAST_MATH
+from windbench.wind.navier_stokes.flags import FAST_MATH
 
 
 def error_bound_factor(alpha: float, active_axes: int) -> float:

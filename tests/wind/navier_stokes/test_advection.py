@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from windbench.wind import advection
-from windbench.wind.boundaries import padded_shape
+from windbench.wind.navier_stokes import advection
+from windbench.wind.navier_stokes.boundaries import padded_shape
 
 CELLS = (6, 7, 8)
 ALPHA = np.array([0.3, -0.2, 0.25])

@@ -20,8 +20,8 @@ import numpy as np
 from numba import njit, prange
 
 from windbench.geometry.raster import segment_triangle
-from windbench.wind.advection import at_face
-from windbench.wind.boundaries import cells_beside
+from windbench.wind.navier_stokes.advection import at_face
+from windbench.wind.navier_stokes.boundaries import cells_beside
 
 
 @njit(cache=True)

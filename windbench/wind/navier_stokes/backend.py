@@ -62,198 +62,55 @@ one (the paper's interior check).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
-from numba import njit, prange
 
 from windbench.errors import ConfigError
 from windbench.geometry.raster import triangle_cells
-from windbench.wind import advection, boundaries, coupling, diffusion
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.boundaries import (
+from windbench.wind.navier_stokes import advection, boundaries, coupling, diffusion
+from windbench.wind.navier_stokes.boundaries import (
     INFLOW,
     KIND_CODES,
     OPENING,
     OUTFLOW,
     PERIODIC,
-    cells_beside,
     component_origin,
     padded_shape,
 )
-from windbench.wind.pressure import MultigridPoisson, ordered_sum
-from windbench.wind.primitives import (
-    SINK,
-    SOURCE,
-    parameter_table,
-    primitive_velocity,
-    superpose,
+from windbench.wind.navier_stokes.forcing import add_force, relax_to_primitives
+from windbench.wind.navier_stokes.multigrid import MultigridPoisson
+from windbench.wind.navier_stokes.projection import (
+    cell_centred,
+    divergence_norms,
+    face_flux,
+    face_weights,
+    max_abs,
+    subtract_gradient,
 )
+from windbench.wind.primitives import parameter_table, superpose
+from windbench.wind.registry import WindConfig, register_backend
 
 ADVECTION = ("semi_lagrangian", "maccormack")
 COUPLING = ("none", "paper", "projection")
 DIFFUSION_MAX_SWEEPS = 500
 
 
-# ---------------------------------------------------------------- kernels (pure functions)
+@dataclass
+class NavierStokesConfig(WindConfig):
+    """``wind.*`` keys of the Navier-Stokes backend (paper §4.1)."""
 
-
-@njit(cache=True, inline="always")
-def _outward_flux(u, v, w, i, j, k):
-    """Sum of the outward face velocities of cell (i, j, k) = h div u there (MAC)."""
-    return (
-        u[i + 2, j + 1, k + 1]
-        - u[i + 1, j + 1, k + 1]
-        + v[i + 1, j + 2, k + 1]
-        - v[i + 1, j + 1, k + 1]
-        + w[i + 1, j + 1, k + 2]
-        - w[i + 1, j + 1, k + 1]
-    )
-
-
-@njit(cache=True, parallel=True)
-def face_flux(u, v, w, target, out):
-    """out_c = h div u - target_c = sum of outward face velocities of cell c - target_c."""
-    nx, ny, nz = out.shape
-    for i in prange(nx):
-        for j in range(ny):
-            for k in range(nz):
-                out[i, j, k] = _outward_flux(u, v, w, i, j, k) - target[i, j, k]
-
-
-@njit(cache=True, parallel=True)
-def divergence_norms(u, v, w, target, solid):
-    """(max, sum of squares, count) of h div u - target over the air cells, by planes."""
-    nx, ny, nz = solid.shape
-    peak = np.zeros(nx)
-    squares = np.zeros(nx)
-    count = np.zeros(nx, dtype=np.int64)
-    for i in prange(nx):
-        top, sq, cnt = 0.0, 0.0, 0  # per plane in registers, stored once
-        for j in range(ny):
-            for k in range(nz):
-                if solid[i, j, k]:
-                    continue
-                d = abs(_outward_flux(u, v, w, i, j, k) - target[i, j, k])
-                top = max(top, d)
-                sq += d * d
-                cnt += 1
-        peak[i], squares[i], count[i] = top, sq, cnt
-    return peak.max(), ordered_sum(squares), count.sum()
-
-
-@njit(cache=True, parallel=True)
-def max_abs(q):
-    """max |q| (planes in parallel; a max is order-independent)."""
-    peak = np.zeros(q.shape[0])
-    for i in prange(q.shape[0]):
-        top = 0.0
-        for j in range(q.shape[1]):
-            for k in range(q.shape[2]):
-                top = max(top, abs(q[i, j, k]))
-        peak[i] = top
-    return peak.max()
-
-
-@njit(cache=True, parallel=True)
-def subtract_gradient(q, a, psi, free, periodic):
-    """q_f -= psi_+ - psi_- on the free faces of component a (ghost psi = 0 at openings)."""
-    nx, ny, nz = psi.shape
-    n_a = psi.shape[a]
-    P0, P1, P2 = q.shape
-    for I in prange(1, P0 - 1):
-        for J in range(1, P1 - 1):
-            for K in range(1, P2 - 1):
-                if not free[I, J, K]:
-                    continue
-                ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
-                along = ip if a == 0 else (jp if a == 1 else kp)  # index of the + cell
-                plus = psi[ip, jp, kp] if along < n_a else 0.0
-                if along >= 1:
-                    minus = psi[im, jm, km]
-                elif periodic[a]:
-                    minus = psi[im % nx, jm % ny, km % nz]
-                else:
-                    minus = 0.0
-                q[I, J, K] -= plus - minus  # u_f <- u_f - (psi_+ - psi_-)
-
-
-@njit(cache=True)
-def cell_centred(u, v, w, solid, out):
-    """out = mean of the two faces per axis at each cell centre; 0 in solid cells."""
-    nx, ny, nz = solid.shape
-    for i in prange(nx):
-        for j in range(ny):
-            for k in range(nz):
-                if solid[i, j, k]:
-                    out[i, j, k, 0] = 0.0
-                    out[i, j, k, 1] = 0.0
-                    out[i, j, k, 2] = 0.0
-                    continue
-                out[i, j, k, 0] = 0.5 * (u[i + 1, j + 1, k + 1] + u[i + 2, j + 1, k + 1])
-                out[i, j, k, 1] = 0.5 * (v[i + 1, j + 1, k + 1] + v[i + 1, j + 2, k + 1])
-                out[i, j, k, 2] = 0.5 * (w[i + 1, j + 1, k + 1] + w[i + 1, j + 1, k + 2])
-
-
-@njit(cache=True)
-def add_force(q, free, dv):
-    """q += dv on the free faces (dv = f_a dt, a uniform body force)."""
-    P0, P1, P2 = q.shape
-    for I in prange(1, P0 - 1):
-        for J in range(1, P1 - 1):
-            for K in range(1, P2 - 1):
-                if free[I, J, K]:
-                    q[I, J, K] += dv
-
-
-@njit(cache=True)
-def relax_to_primitives(q, a, origin, h, kinds, params, radii, factor, free):
-    """q += factor chi_i (w_i,a - q) per interior primitive i, chi_i = exp(-(d/r_i)^2)."""
-    P0, P1, P2 = q.shape
-    for I in prange(1, P0 - 1):
-        wi = np.empty(3)
-        for J in range(1, P1 - 1):
-            for K in range(1, P2 - 1):
-                if not free[I, J, K]:
-                    continue
-                px = origin[0] + h * I
-                py = origin[1] + h * J
-                pz = origin[2] + h * K
-                for p in range(kinds.shape[0]):
-                    prm = params[p]
-                    rx, ry, rz = px - prm[0], py - prm[1], pz - prm[2]
-                    if kinds[p] == SOURCE or kinds[p] == SINK:
-                        d2 = rx * rx + ry * ry + rz * rz
-                    else:  # vortex: distance from the axis line
-                        along = rx * prm[3] + ry * prm[4] + rz * prm[5]
-                        d2 = rx * rx + ry * ry + rz * rz - along * along
-                    chi = np.exp(-d2 / (radii[p] * radii[p]))
-                    if chi < 1e-6:
-                        continue
-                    primitive_velocity(kinds[p], prm, px, py, pz, wi)
-                    q[I, J, K] += factor * chi * (wi[a] - q[I, J, K])
-
-
-@njit(cache=True)
-def face_weights(free, a, periodic, out):
-    """Poisson face weights of axis a (unpadded faces) from the free-face mask."""
-    n0, n1, n2 = out.shape
-    for i in range(n0):
-        for j in range(n1):
-            for k in range(n2):
-                out[i, j, k] = free[i + 1, j + 1, k + 1]
-    if periodic[a] and out.shape[a] == 2:  # one periodic cell: the face meets itself
-        out[...] = 0.0
-    elif periodic[a]:  # the duplicate last face carries the first one's weight
-        if a == 0:
-            out[n0 - 1] = out[0]
-        elif a == 1:
-            out[:, n1 - 1] = out[:, 0]
-        else:
-            out[:, :, n2 - 1] = out[:, :, 0]
-
-
-# ---------------------------------------------------------------- backend
+    name: str = "navier_stokes"
+    advection: str = "semi_lagrangian"  # semi_lagrangian | maccormack
+    viscosity: float = 1.5e-5  # kinematic, m^2/s (air)
+    pressure_tol: float = 1e-6  # relative residual of the projection
+    pressure_max_iterations: int = 200
+    diffusion_tol: float = 1e-8  # bound on the implicit solve's max error / velocity scale
+    source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
+    coupling: str = "paper"  # none | paper | projection (paper §4.1.2)
+    body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
 
 
 def _check(params):
@@ -278,10 +135,10 @@ def _check(params):
         raise ConfigError("wind.body_force", f"must be 3 finite numbers (m/s^2), got {force}")
 
 
+@register_backend("navier_stokes", config=NavierStokesConfig)
 class NavierStokesWind(WindField):
     """Stable-fluids wind on a MAC grid (see module docstring)."""
 
-    name = "navier_stokes"
     # Semi-Lagrangian advection is stable at any CFL, but a backtrace longer than a few
     # cells jumps over thin walls and smears the flow: warn above 5 (Foster & Fedkiw 2001).
     max_cfl = 5.0

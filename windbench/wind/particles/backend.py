@@ -3,10 +3,10 @@
 "In our model every wind source is also a particle source: these particles form an
 uncoupled particle system which can be considered as a wind gust." Each step:
 
-1. **Emission** (:mod:`windbench.wind.emission`): every source emits its own particles over
+1. **Emission** (:mod:`windbench.wind.particles.emission`): every source emits its own particles over
    its region, at its rate, during its gust intervals; a particle emitted at instant t_e
    within the step is advanced only by the rest of the step.
-2. **Tracing** (:mod:`windbench.wind.tracing`): a particle of source i moves in w_i alone
+2. **Tracing** (:mod:`windbench.wind.particles.tracing`): a particle of source i moves in w_i alone
    (explicit Euler, p += w_i(p) dt); its path is cut at every cell face, and every cell a
    piece crosses is marked as reached by source i at this time.
 3. **Lee**: each piece is tested against the rigid bodies and the current cloth triangles
@@ -56,19 +56,20 @@ Choices the paper leaves open (written down here):
   a particle does not inherit their velocity (the paper's static collision test). With
   ``memory`` of a few steps the lee follows moving cloth.
 
-Config (``conf/wind/particles.yaml``, schema :class:`windbench.config.ParticleWindConfig`):
+Config (``conf/wind/particles.yaml``, schema :class:`ParticleConfig`):
 ``particles_per_second`` (per source; null: automatic, see emission), ``particles_per_cell``,
 ``max_particles`` (live particles are capped: emission beyond it is dropped),
 ``max_age`` (s), ``memory`` (s), ``max_hits`` (collisions per particle per step),
 ``deflected_cells`` (``all``, ``bodies`` or ``none``, see above),
 ``seed`` (``${seed}``). Per-source ``emit`` / ``gusts`` keys: see
-:mod:`windbench.wind.emission`.
+:mod:`windbench.wind.particles.emission`.
 """
 
 from __future__ import annotations
 
 import time
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -76,9 +77,8 @@ from windbench.errors import ConfigError
 from windbench.geometry.bodies import body_table
 from windbench.geometry.raster import triangle_cell_pairs
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.emission import emitters_from_scene
-from windbench.wind.primitives import parameter_table
-from windbench.wind.tracing import (
+from windbench.wind.particles.emission import emitters_from_scene
+from windbench.wind.particles.tracing import (
     BODIES,
     MARK_MODES,
     SOLID,
@@ -90,6 +90,8 @@ from windbench.wind.tracing import (
     sort_by_cell,
     trace_gusts,
 )
+from windbench.wind.primitives import parameter_table
+from windbench.wind.registry import WindConfig, register_backend
 
 CONTACT_OFFSET = 1e-6  # particles rest this many cell widths outside a surface they hit
 SORT_EVERY = 8  # steps between reorderings of the particles by cell (memory locality)
@@ -97,6 +99,21 @@ SORT_EVERY = 8  # steps between reorderings of the particles by cell (memory loc
 # are sparse (fewer than one per two cells); denser particles find their cells in cache.
 PREFETCH_CELLS = 1 << 16
 PREFETCH_DENSITY = 0.5  # particles per cell
+
+
+@dataclass
+class ParticleConfig(WindConfig):
+    """``wind.*`` keys of the particle-tracing backend (paper §4.2.2)."""
+
+    name: str = "particles"
+    particles_per_second: float | None = None  # per source; null: particles_per_cell rule
+    particles_per_cell: float = 2.0  # automatic rate: new particles per emitter cell per memory
+    max_particles: int = 1_000_000  # cap on live particles (all sources)
+    max_age: float = 10.0  # s; older particles die
+    memory: float = 0.1  # s; a cell keeps a source's wind this long after its last particle
+    max_hits: int = 8  # collisions per particle per step before it waits for the next step
+    deflected_cells: str = "bodies"  # which hits make later marks w - (n.w) n: all|bodies|none
+    seed: int = 0  # conf/wind/particles.yaml sets ${seed}
 
 
 def _check(params) -> None:
@@ -116,10 +133,9 @@ def _check(params) -> None:
             raise ConfigError(f"wind.{key}", f"must be {allowed}, got {getattr(params, key)}")
 
 
+@register_backend("particles", config=ParticleConfig)
 class ParticleWind(WindField):
     """Gust particles per source; u = sum of the reached sources' w_i (module docstring)."""
-
-    name = "particles"
 
     @classmethod
     def check(cls, scene, grid, params) -> None:

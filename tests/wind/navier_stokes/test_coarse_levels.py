@@ -1,4 +1,4 @@
-"""The small multigrid levels in flat per-cell tables (windbench.wind.coarse_levels)
+"""The small multigrid levels in flat per-cell tables (windbench.wind.navier_stokes.coarse_levels)
 against answers known without the code: the operator written out with numpy, a
 Gauss-Seidel update solved by hand, the mean of the children, and the symmetry of the
 preconditioner that conjugate gradients needs."""
@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from poisson_reference import operator_numpy
 
-from windbench.wind import coarse_levels, pressure
-from windbench.wind.coarse_levels import CoarseLevels
-from windbench.wind.pressure import _Level
+from tests.wind.navier_stokes.poisson_reference import operator_numpy
+from windbench.wind.navier_stokes import coarse_levels
+from windbench.wind.navier_stokes import multigrid as pressure
+from windbench.wind.navier_stokes.coarse_levels import CoarseLevels
+from windbench.wind.navier_stokes.multigrid import _Level
 
 SHAPE = (6, 4, 8)
 

@@ -7,7 +7,7 @@ backtrace displacement d given by the second-order midpoint rule (RK2)
     x_mid = x - dt/2 u(x),   d(x) = dt u(x_mid),
 
 and q(x - d) interpolated trilinearly in q's padded lattice (ghost layer filled by
-:mod:`windbench.wind.boundaries`). The displacement is computed once per cell centre
+:mod:`windbench.wind.navier_stokes.boundaries`). The displacement is computed once per cell centre
 (:func:`_backtrace_plane`: u(x) the mean of the cell's two faces per axis, u(x_mid)
 interpolated from the staggered components) and every face takes the mean of the
 displacements of the two cells it separates (:func:`advect`). For a linear velocity field this is exactly the
@@ -40,7 +40,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from windbench.wind.flags import FAST_MATH
+from windbench.wind.navier_stokes.flags import FAST_MATH
 
 ONE = np.uint64(1)  # index arithmetic on unsigned indices must stay unsigned
 

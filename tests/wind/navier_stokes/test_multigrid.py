@@ -1,4 +1,4 @@
-"""Pressure-solver kernels (windbench.wind.pressure) against answers known without the
+"""Pressure-solver kernels (windbench.wind.navier_stokes.multigrid) against answers known without the
 code: the operator A x = sum_f w_f (x_c - x_nb) written out with numpy, a Gauss-Seidel
 update solved by hand, numpy's dot product."""
 
@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from poisson_reference import operator_numpy as _operator_numpy
 
-from windbench.wind import pressure
-from windbench.wind.pressure import _Level
+from tests.wind.navier_stokes.poisson_reference import operator_numpy as _operator_numpy
+from windbench.wind.navier_stokes import multigrid as pressure
+from windbench.wind.navier_stokes.multigrid import _Level
 
 SHAPE = (10, 8, 12)
 

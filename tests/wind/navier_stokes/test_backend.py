@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from experiments.validation_ns.problems import backend
 from windbench.cli import compose_config
 from windbench.cloth.mesh import flag_mesh
 from windbench.errors import ConfigError
 from windbench.simulate import run
 from windbench.wind.base import Obstacles
-from windbench.wind.ns_problems import backend, free_stream, poiseuille, taylor_green
 
 FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
 NO_OBSTACLES = Obstacles.rigid_only(())
@@ -152,36 +152,6 @@ def test_volume_conservation_open_box():
     outflow = u[-1].sum() * h2 + (w[:, :, -1].sum() - w[:, :, 0].sum()) * h2
     assert inflow > 1.0
     assert abs(inflow - outflow) <= 1e-6 * inflow
-
-
-def test_free_stream_preserved():
-    """Uniform oblique wind through inflow/outflow faces stays uniform to 1e-8 relative."""
-    for scheme in ("semi_lagrangian", "maccormack"):
-        row = free_stream(12, scheme, steps=10)
-        assert row["max_rel_deviation"] <= 1e-8, row
-
-
-def test_taylor_green_decay_rate(record_property):
-    """u ~ exp(-2 nu t) (k = 1 per axis); MacCormack within 5 % at 64 cells."""
-    mc, _ = taylor_green(64, "maccormack", dt=0.02)
-    sl, _ = taylor_green(64, "semi_lagrangian", dt=0.02)
-    record_property("taylor_green_maccormack_rel_error", mc["rate_rel_error"])
-    record_property("taylor_green_semi_lagrangian_rel_error", sl["rate_rel_error"])
-    print(
-        f"Taylor-Green 64 cells dt=0.02: MacCormack rate error {mc['rate_rel_error']:+.3%}, "
-        f"semi-Lagrangian {sl['rate_rel_error']:+.3%}"
-    )
-    assert abs(mc["rate_rel_error"]) < 0.05
-    assert sl["rate"] > mc["rate"]  # plain semi-Lagrangian is the more dissipative scheme
-
-
-def test_poiseuille_profile():
-    """Steady plane Poiseuille flow: u(y) = f / (2 nu) y (H - y) within 1 % at 16 cells."""
-    row, (_, got, exact) = poiseuille(16)
-    assert row["linf_rel_error"] <= 0.01
-    assert np.all(np.diff(got[: len(got) // 2]) > 0)  # parabolic: rising to mid-channel
-    coarse, _ = poiseuille(8)
-    assert coarse["linf_rel_error"] > 2.5 * row["linf_rel_error"]  # second order
 
 
 def test_projection_is_idempotent(stepped):
