@@ -55,6 +55,7 @@ class SceneConfig:
     probes: dict[str, ProbeBoxConfig] = field(default_factory=dict)
     lee_force: LeeForceConfig | None = None
     reference_speed: float | None = None
+    wake: Any = None  # wake profiles behind an obstacle (windbench.scenes.WakeProbe)
 
 
 @dataclass
@@ -65,7 +66,8 @@ class GridConfig:
 @dataclass
 class SimConfig:
     dt: float = 1.0 / 60.0  # s
-    duration: float = 1.0  # s of simulated time
+    spinup: Any = "auto"  # s simulated before recording; auto: two flow-through times
+    duration: float = 1.0  # s of simulated time recorded after the spin-up
     progress: bool = True  # tqdm bar (only on a terminal)
     fail_at_step: int | None = None  # fault injection: the run diverges at this step (tests)
 

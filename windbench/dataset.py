@@ -26,9 +26,14 @@ VARIABLES = {
     "divergence_rms": ("RMS of |div u| h / U_ref over interior air cells", "1"),
     "divergence_max": ("max of |div u| h / U_ref over interior air cells", "1"),
     "lee_speed_ratio": ("mean |u| in the lee box / mean |u| in the free-stream box", "1"),
+    "wake_speed_ratio": (
+        "u / u0 along the wind behind the scene's obstacle (u0: the undisturbed wind there)",
+        "1",
+    ),
     "lee_force_ratio": ("|F| on the sheltered cloth / |F| on the exposed cloth", "1"),
     "step_seconds": ("wall time per step and phase", "s"),
     "probe_wind": ("wind at the probe lattice points", "m s-1"),
+    "probe_wind_mean": ("wind at the probe lattice points, mean over the steady window", "m s-1"),
     "probe_points": ("probe lattice point positions", "m"),
     "cloth_triangles": ("cloth triangle vertex ids", "1"),
 }

@@ -10,6 +10,7 @@ to the cloth solver.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import sys
 import time
@@ -32,6 +33,7 @@ from windbench.grid import Grid
 from windbench.scenes import Scene, build_scene
 from windbench.wind import backend_class, make_wind
 from windbench.wind.base import Obstacles
+from windbench.wind.primitives import superpose
 
 log = logging.getLogger("windbench")
 PHASES = ("wind", "aero", "cloth", "total")
@@ -49,10 +51,19 @@ class RunSetup:
     aero: AeroParams
     cloth: ClothModel
     dt: float
-    n_steps: int
+    n_steps: int  # recorded steps
+    spinup_steps: int  # steps before recording starts
     snapshot_steps: tuple[int, ...]
     probe_points: dict[str, np.ndarray]
     cfl: float  # fastest source speed x dt / h
+    flow_through_time: float  # s: domain length along the wind / reference speed
+    analysis_start: float  # s: start of the steady window the statistics are taken over
+    wake: tuple | None  # (points, direction, u0) of the scene's wake probe
+
+    @property
+    def start_time(self) -> float:
+        """Simulated time at which recording starts (the end of the spin-up)."""
+        return self.spinup_steps * self.dt
 
 
 def _require(cond: bool, key: str, message: str):
@@ -83,6 +94,8 @@ def prepare(cfg: DictConfig) -> RunSetup:
     backend.check(scene, grid, cfg.wind)
     cfl = _check_cfl(scene, grid, dt, backend)
     n_steps = int(round(duration / dt))
+    spinup_steps = int(round(_spinup(cfg.sim.spinup, scene) / dt))
+    flow_through, start = analysis_window(scene, spinup_steps * dt, (spinup_steps + n_steps) * dt)
     snaps = np.unique(np.round(np.linspace(0, n_steps, cfg.output.snapshots + 1)[1:]).astype(int))
     model = ClothModel.from_meshes(scene.cloths)
     make_cloth_solver(cfg.cloth, model, scene.bodies)  # unknown solver or material: fail now
@@ -94,10 +107,60 @@ def prepare(cfg: DictConfig) -> RunSetup:
         cloth=model,
         dt=dt,
         n_steps=n_steps,
+        spinup_steps=spinup_steps,
         snapshot_steps=tuple(int(s) for s in snaps if s >= 1),
         probe_points={k: b.lattice(int(cfg.output.probe_points)) for k, b in scene.probes.items()},
         cfl=cfl,
+        flow_through_time=flow_through,
+        analysis_start=start,
+        wake=_wake_reference(scene),
     )
+
+
+FLOW_THROUGHS = 2.0  # the wind has crossed the domain this many times before statistics
+
+
+def flow_through_time(scene: Scene) -> float:
+    """T = L / U_ref: L the domain's extent along the fastest uniform source, U_ref the
+    scene's reference speed; NaN for a scene without a uniform source (no flow through)."""
+    uniform = [s for s in scene.sources if s.kind == "uniform" and s.speed_scale() > 0]
+    if not uniform:
+        return math.nan
+    fastest = max(uniform, key=lambda s: s.speed_scale())
+    direction = np.abs(np.asarray(fastest.velocity)) / fastest.speed_scale()
+    return float(direction @ (scene.upper - scene.lower)) / scene.reference_speed
+
+
+def analysis_window(scene: Scene, start: float, end: float) -> tuple[float, float]:
+    """(flow-through time T, start of the steady window) of a run recording [start, end].
+
+    Statistics are taken over t >= max(start, 2 T): by then the wind has crossed the
+    domain twice (the particle front at least once, since particles move with the
+    sources' own wind) and the start-up transient has left it. A scene whose air does not
+    flow through keeps the second half of the recorded time.
+    """
+    flow_through = flow_through_time(scene)
+    if not np.isfinite(flow_through):
+        return flow_through, start + 0.5 * (end - start)
+    return flow_through, max(start, FLOW_THROUGHS * flow_through)
+
+
+def _spinup(value, scene: Scene) -> float:
+    """``sim.spinup`` in seconds: ``auto`` is FLOW_THROUGHS flow-through times (0 for a
+    scene without flow through), so that recording starts with a developed wind."""
+    if str(value) == "auto":
+        flow_through = flow_through_time(scene)
+        return FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+    try:
+        seconds = float(value)
+    except (TypeError, ValueError):
+        seconds = math.nan
+    _require(
+        np.isfinite(seconds) and seconds >= 0,
+        "sim.spinup",
+        f"must be 'auto' or a number of seconds >= 0, got {value!r}",
+    )
+    return seconds
 
 
 def memory_bytes() -> int:
@@ -174,6 +237,8 @@ class Recorder:
         self.snap_times: list[float] = []
         self.snap_wind: list[np.ndarray] = []
         self.snap_probe: list[np.ndarray] = []
+        self.probe_sum: np.ndarray | None = None  # probe wind summed over the steady window
+        self.probe_count = 0
 
     def add(self, name: str, value):
         self.rows.setdefault(name, []).append(value)
@@ -181,6 +246,15 @@ class Recorder:
     def add_phase(self, phase: str, seconds: float):
         """A backend's sub-phase time (``stats()`` keys ending in ``_seconds``)."""
         self.phases.setdefault(phase, []).append(seconds)
+
+    def accumulate_probes(self, t: float, probe_wind: np.ndarray):
+        """Add the probe wind of a step to the steady-window mean (t >= analysis_start)."""
+        if t < self.setup.analysis_start - 1e-9:
+            return
+        if self.probe_sum is None:
+            self.probe_sum = np.zeros_like(probe_wind)
+        self.probe_sum += probe_wind
+        self.probe_count += 1
 
     def snapshot(self, t: float, wind: np.ndarray, probe_wind: np.ndarray):
         self.snap_times.append(t)
@@ -238,8 +312,17 @@ class Recorder:
         )
         ds["cloth_triangles"] = (("triangle", "corner"), s.cloth.triangles)
         ds["vertex_cloth"] = (("vertex",), s.cloth.vertex_cloth)
+        if "wake_speed_ratio" in self.rows and s.scene.wake is not None:
+            ds = ds.assign_coords(
+                wake_distance=("wake_distance", list(s.scene.wake.distances), {"units": "1"}),
+                wake_height=("wake_height", list(s.scene.wake.heights), {"units": "1"}),
+            )
+            ds["wake_speed_ratio"] = (
+                ("time", "wake_distance", "wake_height"),
+                np.asarray(self.rows["wake_speed_ratio"], dtype=float),
+            )
         for key, values in self.rows.items():
-            if key not in ("step_seconds", "aero_force", "cloth_position"):
+            if key not in ("step_seconds", "aero_force", "cloth_position", "wake_speed_ratio"):
                 ds[key] = (("time",), np.asarray(values, dtype=float))
         if s.probe_points:
             names = sorted(s.probe_points)
@@ -251,6 +334,12 @@ class Recorder:
                 ("snapshot", "probe_point", "component"),
                 np.asarray(self.snap_probe).reshape(len(self.snap_probe), len(pts), 3),
             )
+            mean = (
+                self.probe_sum / self.probe_count
+                if self.probe_count
+                else np.full((len(pts), 3), np.nan)
+            )
+            ds["probe_wind_mean"] = (("probe_point", "component"), mean)
         cfg = s.cfg
         ds.attrs.update(
             wind=str(cfg.wind.name),
@@ -258,6 +347,9 @@ class Recorder:
             resolution=int(cfg.grid.resolution),
             dt=s.dt,
             duration=float(cfg.sim.duration),
+            spinup=s.start_time,
+            flow_through_time=s.flow_through_time,
+            analysis_start=s.analysis_start,
             seed=int(cfg.seed),
             experiment=str(cfg.get("experiment") or ""),
             grid_shape=list(s.grid.shape),
@@ -274,6 +366,18 @@ class Recorder:
             **runtime_info(),
         )
         return annotate(ds)
+
+
+def _wake_reference(scene: Scene):
+    """(points, direction, u0) of the scene's wake probe: u0 is the undisturbed wind of the
+    sources along the probe's direction at each point (``None`` without a probe)."""
+    if scene.wake is None:
+        return None
+    points = scene.wake.points()
+    u0 = superpose(scene.sources, points.reshape(-1, 3)) @ scene.wake.direction
+    if np.any(u0 <= 0):
+        raise ConfigError("scene.wake", "the sources' wind must blow along its direction there")
+    return points, scene.wake.direction, u0.reshape(points.shape[:-1])
 
 
 class Simulation:
@@ -310,6 +414,9 @@ class Simulation:
         t2 = time.perf_counter()
         self.state = self.cloth_solver.step(self.state, vert_f, s.dt)
         t3 = time.perf_counter()
+        if n < s.spinup_steps:  # spin-up: the wind develops, nothing is recorded
+            self._check_finite(n, self.wind.velocity())
+            return
         self._record(n, tri_f, (t1 - t0, t2 - t1, t3 - t2, t3 - t0))
 
     def _record(self, n: int, tri_f, seconds):
@@ -335,18 +442,20 @@ class Simulation:
         if s.scene.lee_force:
             shel, expo = (s.scene.cloth_index(c) for c in s.scene.lee_force)
             rec.add("lee_force_ratio", metrics.force_ratio(forces[shel], forces[expo]))
+        if s.wake is not None:
+            points, direction, u0 = s.wake
+            along = self.wind.sample(points.reshape(-1, 3)) @ direction
+            rec.add("wake_speed_ratio", (along.reshape(u0.shape) / u0).mean(axis=-1))
         for key, value in {**self.wind.stats(), **self.cloth_solver.stats(self.state)}.items():
             if key.endswith("_seconds"):  # a backend's own phase, e.g. advect_seconds
                 rec.add_phase(key.removesuffix("_seconds"), float(value))
             else:
                 rec.add(key, float(value))
-        if n + 1 in s.snapshot_steps:
-            pts = sorted(probe_wind)
-            rec.snapshot(
-                (n + 1) * s.dt,
-                u,
-                np.concatenate([probe_wind[k] for k in pts]) if pts else np.zeros((0, 3)),
-            )
+        pts = sorted(probe_wind)
+        probes = np.concatenate([probe_wind[k] for k in pts]) if pts else np.zeros((0, 3))
+        rec.accumulate_probes((n + 1) * s.dt, probes)
+        if n + 1 - s.spinup_steps in s.snapshot_steps:
+            rec.snapshot((n + 1) * s.dt, u, probes)
 
     def _check_finite(self, n: int, u: np.ndarray):
         if not np.isfinite(u).all():
@@ -356,7 +465,7 @@ class Simulation:
 
     def run(self, progress: bool = True) -> Recorder:
         bar = tqdm(
-            range(self.setup.n_steps),
+            range(self.setup.spinup_steps + self.setup.n_steps),
             desc=f"{self.setup.scene.name}/{self.wind.name}",
             unit="step",
             disable=not (progress and sys.stderr.isatty()),

@@ -17,17 +17,25 @@ Only ``complete`` runs are combined; the others are listed as skipped with the r
 
 Figures per run (DESIGN.md "Run dataset"):
 
-- ``lee_speed_ratio``, ``lee_force_ratio``, ``divergence_rms``: mean over the second half of
-  the simulated time (:data:`AVERAGE_FROM`), after the start-up transient of the wind;
-  ``*_final`` is the value at the last step; ``divergence_max`` is the maximum over all steps.
+- ``lee_speed_ratio``, ``lee_force_ratio``, ``divergence_rms``: mean over the run's steady
+  window, t >= its ``analysis_start`` attribute (two flow-through times of the domain,
+  :func:`windbench.simulate.analysis_window`; older datasets without it: the second half of
+  the recorded time); ``*_final`` is the value at the last step; ``divergence_max`` is the
+  maximum over the window.
 - ``step_seconds_<phase>``: mean wall time per step and phase over every step but the first
   (the first includes numba's compile or cache load); ``seconds_per_step`` = phase ``total``;
-  ``seconds_per_step_median`` its median over the same steps (robust to other processes on
-  a shared machine), ``wind_seconds_median`` the same for the wind phase alone (the
-  backend's own cost: the cost figure uses it).
+  ``seconds_per_step_median`` its median over the steady window (robust to other processes
+  on a shared machine), ``wind_seconds_median`` the same for the wind phase alone (the
+  backend's own cost: the cost figure uses it), ``seconds_per_simulated_second`` the median
+  step over dt.
 - every other per-step variable (a backend's ``stats()``, e.g. ``live_particles`` or pressure
-  iterations): its time mean, like the lee figures;
-- ``lee_error`` (see :mod:`windbench.report.lee`).
+  iterations): its mean over the window, like the lee figures;
+- ``lee_error`` (see :mod:`windbench.report.lee`), from the probe wind averaged over the
+  window (``probe_wind_mean``);
+- the wake profile u/u0 behind the scene's obstacle (``wake_speed_ratio``), window mean.
+
+A complete run whose recorded time holds no steady window is ``unsettled``
+(:func:`windbench.metrics.unsettled_reason`): listed with the reason, never combined.
 """
 
 from __future__ import annotations
@@ -43,9 +51,11 @@ import pandas as pd
 import xarray as xr
 from omegaconf import OmegaConf
 
+from windbench.metrics import unsettled_reason
+
 RUN_FILE = "windbench.nc"
 STATUS_FILE = "run_status.yaml"  # windbench.sweep.STATUS_FILE
-AVERAGE_FROM = 0.5  # time averages use t >= AVERAGE_FROM * t_end
+AVERAGE_FROM = 0.5  # datasets without analysis_start: time averages over t >= this x t_end
 # canonical setting -> dotted config key; always dimensions of the combined dataset
 SETTINGS = {
     "wind": "wind.name",
@@ -65,7 +75,7 @@ class RunRecord:
     """What the report knows about one run file (small: no fields, no cloth frames)."""
 
     path: Path
-    status: str  # complete | failed | partial | unreadable
+    status: str  # complete | unsettled | failed | partial | unreadable | invalid
     reason: str = ""
     settings: dict = field(default_factory=dict)  # canonical settings (wind, scene, ...)
     config: dict = field(default_factory=dict)  # flattened resolved config (dotted keys)
@@ -76,6 +86,7 @@ class RunRecord:
     free_stream_speed: float = math.nan  # mean |u| at the free-stream probes, last snapshot
     reference_speed: float = math.nan
     experiment: str = ""
+    wake: pd.DataFrame | None = None  # window-mean u/u0: index distance (H), columns height (H)
 
     @property
     def label(self) -> str:
@@ -179,35 +190,47 @@ def _config_beside(path: Path) -> dict:
         return {}
 
 
-def _time_mean(values: np.ndarray, times: np.ndarray) -> float:
+def window_mask(ds: xr.Dataset) -> np.ndarray:
+    """Recorded steps inside the run's steady window (t >= ``analysis_start``)."""
+    times = np.asarray(ds["time"].values, dtype=float)
+    start = float(ds.attrs.get("analysis_start", math.nan))
+    if not np.isfinite(start):
+        start = AVERAGE_FROM * times[-1] if times.size else 0.0
+    return times >= start - 1e-9
+
+
+def _window_mean(values: np.ndarray, window: np.ndarray) -> float:
     if values.size == 0 or not np.isfinite(values).any():
         return math.nan
-    late = times >= AVERAGE_FROM * times[-1]
-    return float(np.nanmean(values[late] if late.any() else values))
+    chosen = values[window] if window.any() else values
+    return float(np.nanmean(chosen)) if np.isfinite(chosen).any() else math.nan
 
 
 def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
-    times = np.asarray(ds["time"].values, dtype=float)
+    window = window_mask(ds) if ds.sizes.get("time", 0) else np.zeros(0, bool)
     figs: dict[str, float] = {}
     for name in AVERAGED:
         if name in ds and ds.sizes.get("time", 0):
             vals = np.asarray(ds[name].values, dtype=float)
-            figs[name] = _time_mean(vals, times)
+            figs[name] = _window_mean(vals, window)
             figs[f"{name}_final"] = float(vals[-1])
         else:
             figs[name] = figs[f"{name}_final"] = math.nan
     known = {*AVERAGED, "divergence_max"}
-    for name, var in ds.data_vars.items():  # backend figures (stats()): time means
+    for name, var in ds.data_vars.items():  # backend figures (stats()): window means
         if var.dims == ("time",) and name not in known and var.dtype.kind in "fiu":
-            figs[str(name)] = _time_mean(np.asarray(var.values, dtype=float), times)
+            figs[str(name)] = _window_mean(np.asarray(var.values, dtype=float), window)
     if "divergence_max" in ds and ds.sizes.get("time", 0):
-        figs["divergence_max"] = float(np.nanmax(ds["divergence_max"].values))
+        vals = np.asarray(ds["divergence_max"].values, dtype=float)
+        figs["divergence_max"] = float(np.nanmax(vals[window] if window.any() else vals))
     else:
         figs["divergence_max"] = math.nan
     phases = {}
     if "step_seconds" in ds and ds.sizes.get("time", 0):
         sec = np.asarray(ds["step_seconds"].values, dtype=float)
-        steady = sec[1:] if sec.shape[0] > 1 else sec
+        later = np.arange(sec.shape[0]) >= 1 if sec.shape[0] > 1 else np.ones(1, bool)
+        steady = sec[later]
+        in_window = sec[later & window] if (later & window).any() else steady
         for j, ph in enumerate(ds["phase"].values):
             phases[str(ph)] = float(steady[:, j].mean())
     figs["seconds_per_step"] = phases.get("total", math.nan)
@@ -215,11 +238,18 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     names = [str(p) for p in ds["phase"].values] if phases else []
     for phase, key in (("total", "seconds_per_step_median"), ("wind", "wind_seconds_median")):
         if phase in names:
-            figs[key] = float(np.median(steady[:, names.index(phase)]))
+            figs[key] = float(np.median(in_window[:, names.index(phase)]))
+    figs["seconds_per_simulated_second"] = figs["seconds_per_step_median"] / float(
+        ds.attrs.get("dt", math.nan)
+    )
     shape = ds.attrs.get("grid_shape")
     shape = (
         [int(v) for v in np.atleast_1d(shape)] if shape is not None else list(ds["wind"].shape[1:4])
     )
+    for key in ("analysis_start", "flow_through_time", "spinup"):
+        figs[key] = float(ds.attrs.get(key, math.nan))
+    times = np.asarray(ds["time"].values, dtype=float)
+    figs["end_time"] = float(times[-1]) if times.size else math.nan
     figs["grid_cells"] = int(np.prod(shape))
     figs["grid_spacing"] = float(ds.attrs.get("grid_spacing", math.nan))
     figs["steps_completed"] = int(ds.attrs.get("steps_completed", ds.sizes.get("time", 0)))
@@ -228,11 +258,16 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
 
 
 def _probes(ds: xr.Dataset, rec: RunRecord):
-    if "probe_wind" not in ds or ds.sizes.get("snapshot", 0) == 0:
+    """The lee probe wind: the steady-window mean (``probe_wind_mean``), or the last
+    snapshot in datasets without it."""
+    if "probe_wind_mean" in ds:
+        last = np.asarray(ds["probe_wind_mean"].values, dtype=float)
+    elif "probe_wind" in ds and ds.sizes.get("snapshot", 0):
+        last = np.asarray(ds["probe_wind"].isel(snapshot=-1).values, dtype=float)
+    else:
         return
     box = np.asarray(ds["probe_box"].values).astype(str)
     pts = np.asarray(ds["probe_points"].values, dtype=float)
-    last = np.asarray(ds["probe_wind"].isel(snapshot=-1).values, dtype=float)
     lee, free = box == "lee", box == "free_stream"
     rec.lee_points, rec.lee_wind = pts[lee], last[lee]
     if free.any():
@@ -277,6 +312,8 @@ def read_run(path: Path) -> RunRecord:
         try:
             rec.figures, rec.phases = _figures(ds)
             _probes(ds, rec)
+            rec.wake = _wake(ds)
+            unsettled = _unsettled(ds)
         except Exception as err:  # noqa: BLE001 - a damaged variable makes the run partial
             rec.status, rec.reason = "partial", f"cannot read figures: {type(err).__name__}: {err}"
             return rec
@@ -289,7 +326,33 @@ def read_run(path: Path) -> RunRecord:
         rec.status, rec.reason = "partial", f"missing variables {missing}"
     elif planned >= 0 and done < planned:
         rec.status, rec.reason = "partial", f"{done} of {planned} steps recorded"
+    elif unsettled:
+        rec.status, rec.reason = "unsettled", unsettled
     return rec
+
+
+def _unsettled(ds: xr.Dataset) -> str:
+    """The reason a run has no steady window ('' if it has one or predates the attribute)."""
+    if "analysis_start" not in ds.attrs or not ds.sizes.get("time", 0):
+        return ""
+    return unsettled_reason(
+        ds["time"].values,
+        float(ds.attrs["analysis_start"]),
+        float(ds.attrs.get("flow_through_time", math.nan)),
+    )
+
+
+def _wake(ds: xr.Dataset) -> pd.DataFrame | None:
+    """Window mean of ``wake_speed_ratio``: rows distance / H, columns height / H."""
+    if "wake_speed_ratio" not in ds or not ds.sizes.get("time", 0):
+        return None
+    window = window_mask(ds)
+    mean = ds["wake_speed_ratio"].isel(time=np.flatnonzero(window)).mean("time")
+    return pd.DataFrame(
+        mean.values,
+        index=pd.Index(mean["wake_distance"].values, name="distance_H"),
+        columns=pd.Index(mean["wake_height"].values, name="height_H"),
+    )
 
 
 def read_runs(paths: Sequence[Path], progress: bool = True) -> list[RunRecord]:
@@ -453,6 +516,9 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
             ds[name].attrs["units"] = unit
     ds.attrs.update(
         runs=len(good),
-        averaging=f"time means over t >= {AVERAGE_FROM} t_end; step times exclude the first step",
+        averaging=(
+            "means over each run's steady window (t >= analysis_start: two flow-through "
+            "times); step times exclude the first step"
+        ),
     )
     return ds

@@ -70,7 +70,14 @@ import numpy as np
 from windbench.errors import ConfigError
 from windbench.geometry.raster import triangle_cells
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.navier_stokes import advection, boundaries, coupling, diffusion
+from windbench.wind.fluctuation import Fluctuation
+from windbench.wind.navier_stokes import (
+    advection,
+    boundaries,
+    coupling,
+    diffusion,
+    turbulence,
+)
 from windbench.wind.navier_stokes.boundaries import (
     INFLOW,
     KIND_CODES,
@@ -90,11 +97,13 @@ from windbench.wind.navier_stokes.projection import (
     max_abs,
     subtract_gradient,
 )
-from windbench.wind.primitives import parameter_table, superpose
+from windbench.wind.primitives import parameter_table, profile_scale, superpose
 from windbench.wind.registry import WindConfig, register_backend
 
-ADVECTION = ("semi_lagrangian", "maccormack")
+ADVECTION = ("semi_lagrangian", "maccormack", "second_order")
 COUPLING = ("none", "paper", "projection")
+TURBULENCE = ("none", "smagorinsky")
+EDDY_CAP = 0.9  # explicit eddy diffusion: nu_t dt / h^2 <= EDDY_CAP / (2 d)
 DIFFUSION_MAX_SWEEPS = 500
 
 
@@ -111,6 +120,9 @@ class NavierStokesConfig(WindConfig):
     source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
     coupling: str = "paper"  # none | paper | projection (paper §4.1.2)
     body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
+    turbulence: str = "none"  # none | smagorinsky (subgrid eddy viscosity)
+    smagorinsky_constant: float = 0.17  # C_s of nu_t = (C_s h)^2 |S|
+    seed: int = 0  # synthetic inflow turbulence (conf/wind/navier_stokes.yaml sets ${seed})
 
 
 def _check(params):
@@ -120,6 +132,12 @@ def _check(params):
     name = str(params.get("coupling", "paper"))
     if name not in COUPLING:
         raise ConfigError("wind.coupling", f"must be one of {list(COUPLING)}, got {name!r}")
+    name = str(params.get("turbulence", "none"))
+    if name not in TURBULENCE:
+        raise ConfigError("wind.turbulence", f"must be one of {list(TURBULENCE)}, got {name!r}")
+    cs = float(params.get("smagorinsky_constant", 0.17))
+    if not (np.isfinite(cs) and 0 < cs < 1):
+        raise ConfigError("wind.smagorinsky_constant", f"must lie in (0, 1), got {cs}")
     for key in ("viscosity", "source_relaxation"):
         val = float(params.get(key))
         if not (np.isfinite(val) and val >= 0):
@@ -158,6 +176,14 @@ class NavierStokesWind(WindField):
         self.diffusion_tol = float(params.diffusion_tol)
         self.max_iterations = int(params.pressure_max_iterations)
         self.relaxation = float(params.source_relaxation)
+        self.turbulence = str(params.turbulence)
+        self.smagorinsky = float(params.smagorinsky_constant)
+        self.time = 0.0
+        self.fluctuations = [
+            (s, Fluctuation.build(*s.turbulence, s.velocity, int(params.seed) + i))
+            for i, s in enumerate(scene.sources)
+            if s.turbulence is not None
+        ]
         self.body_force = np.asarray(list(params.body_force), dtype=float)
         shape = grid.shape
         self.h = float(grid.h)
@@ -169,13 +195,11 @@ class NavierStokesWind(WindField):
         # axes that carry a derivative: not a one-cell periodic axis (2D problems)
         self.axes = np.array([not (self.periodic[a] and shape[a] == 1) for a in range(3)], np.int64)
         self.origins = np.stack([component_origin(self.lower, self.h, a) for a in range(3)])
-        walls = [
+        self.walls = [
             np.asarray(scene.wall_velocity.get(f, np.zeros(3)), dtype=float)
             for f in boundaries.FACE_NAMES
         ]
-        self.planes = boundaries.boundary_planes(
-            self.kinds, walls, self._inflow, self.lower, grid.upper, self.h, shape
-        )
+        self.planes = self._boundary_planes()
         interior = [s for s in scene.sources if s.kind != "uniform"]
         self.prim_kinds, self.prim_params = parameter_table(interior)
         self.prim_radii = np.array([max(p.core_radius, self.h) for p in interior])
@@ -183,9 +207,15 @@ class NavierStokesWind(WindField):
         # state: the three padded face arrays, pressure (warm start) and work arrays
         self.q = [np.zeros(padded_shape(shape, a)) for a in range(3)]
         self.work = [np.zeros_like(x) for x in self.q]
-        self.work2 = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
-        self.qmin = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
-        self.qmax = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
+        limited = self.advection in ("maccormack", "second_order")
+        self.work2 = [np.zeros_like(x) for x in self.q] if limited else None
+        self.qmin = [np.zeros_like(x) for x in self.q] if limited else None
+        self.qmax = [np.zeros_like(x) for x in self.q] if limited else None
+        second = self.advection == "second_order"
+        self.old = [np.zeros_like(x) for x in self.q] if second else None  # u^(n-1)
+        self.rhs_w = [np.zeros_like(x) for x in self.q] if second else None
+        self._pressure_scale = 0.0  # converts psi into (dt/2) grad p for the next step
+        self._last_dt = 0.0
         self.free_static = [np.zeros(x.shape, np.uint8) for x in self.q]
         for a in range(3):
             boundaries.free_faces(a, self.kinds, self.solid, self.free_static[a])
@@ -197,6 +227,7 @@ class NavierStokesWind(WindField):
         self._set_weights()
         self.psi = np.zeros(shape)
         self.rhs = np.zeros(shape)
+        self.nu_t = np.zeros(shape) if self.turbulence == "smagorinsky" else None
         self._u_cell = np.zeros((*shape, 3))
         self._cell_valid = False
         self._stats: dict[str, float] = {}
@@ -223,11 +254,22 @@ class NavierStokesWind(WindField):
         return kinds.astype(np.int64)
 
     def _inflow(self, points, face) -> np.ndarray:
-        """Inflow wind at points of ``face``: uniform sources only where they blow in."""
+        """Inflow wind at points of ``face`` at the backend's time: uniform sources only
+        where they blow in, with their synthetic turbulence if they carry one."""
         b = face // 2
         n_out = -1.0 if face % 2 == 0 else 1.0
         chosen = [s for s in self.scene.sources if s.kind != "uniform" or s.velocity[b] * n_out < 0]
-        return superpose(chosen, points)
+        wind = superpose(chosen, points)
+        for source, fluctuation in self.fluctuations:
+            if source in chosen:
+                wind += fluctuation(points, self.time) * profile_scale(source, points)[:, None]
+        return wind
+
+    def _boundary_planes(self):
+        return boundaries.boundary_planes(
+            self.kinds, self.walls, self._inflow, self.lower, self.grid.upper, self.h,
+            self.grid.shape,
+        )  # fmt: skip
 
     def _mass_sources(self, interior) -> np.ndarray:
         """Target h div u per cell: each source (sink) emits (draws) m over its core."""
@@ -261,6 +303,7 @@ class NavierStokesWind(WindField):
             self.q[a][...] = np.asarray(field(pts.reshape(-1, 3)))[:, a].reshape(pts.shape[:3])
         self._apply_boundaries(set_normal=True)
         self._project()
+        self._pressure_scale, self._last_dt = 0.0, 0.0  # no earlier time level
 
     def _faces_touching_solid(self, a) -> np.ndarray:
         """Flat indices of the faces of component a next to a body (model: bodies are rigid)."""
@@ -293,12 +336,13 @@ class NavierStokesWind(WindField):
         for a in range(3):
             boundaries.fill_boundary(arrays[a], a, self.kinds, self.planes[a], True)
 
-    def _carry(self, dt_h, src, out, bounds=False):
-        """out[a] = src[a](x - d) for the three components, d the backtrace of the current
-        velocity over dt_h = dt / h; with ``bounds`` also the limiter's qmin/qmax."""
+    def _carry(self, dt_h, src, out, bounds=False, velocity=None):
+        """out[a] = src[a](x - d) for the three components, d the backtrace of ``velocity``
+        (default: the current one) over dt_h = dt / h; with ``bounds`` also the limiter's
+        qmin/qmax."""
         qmin, qmax = (self.qmin, self.qmax) if bounds else (out, out)
         advection.advect(
-            *self.q, self.cells, self.periodic, dt_h, numba.get_num_threads(),
+            *(velocity or self.q), self.cells, self.periodic, dt_h, numba.get_num_threads(),
             tuple(src), tuple(out), tuple(qmin), tuple(qmax), bounds,
         )  # fmt: skip
 
@@ -316,6 +360,70 @@ class NavierStokesWind(WindField):
                 )
         self.q, self.work = self.work, self.q
         self._apply_boundaries(set_normal=True)
+
+    def _advect_diffuse_second_order(self, dt) -> int:
+        """Advection and viscosity of the second-order step (``wind.advection=second_order``).
+
+        The trapezoidal rule along the characteristic from (X, t^n) to (x, t^n+1),
+
+            u^n+1(x) = u^n(X) - dt/2 [grad p^n(X) + grad p^n+1(x)]
+                       + nu dt/2 [lap u^n(X) + lap u^n+1(x)],
+
+        is second order in time (the semi-Lagrangian Crank-Nicolson projection scheme,
+        e.g. Xiu & Karniadakis 2001): w = u^n - (dt/2) grad p^n + nu dt/2 lap u^n is carried
+        by limited MacCormack along backtraces of the midpoint velocity u^n+1/2 = 3/2 u^n -
+        1/2 u^n-1, the implicit half of the viscosity is solved (alpha = nu dt / (2 h^2)),
+        and the projection supplies (dt/2) grad p^n+1 as the gradient of its psi, which the
+        next step subtracts again. The first step has no previous pressure or velocity: its
+        psi is a full step's dt grad p, halved for the second step."""
+        dt_h = dt / self.h
+        if self._last_dt == 0.0:  # first step: u^n-1 = u^n
+            for a in range(3):
+                self.old[a][...] = self.q[a]
+        for a in range(3):
+            np.multiply(self.old[a], -0.5, out=self.old[a])  # u^n+1/2 = 3/2 u^n - 1/2 u^n-1
+            self.old[a] += 1.5 * self.q[a]
+        scale = self._pressure_scale * (dt / self._last_dt if self._last_dt else 0.0)
+        beta = 0.5 * self.viscosity * dt / self.h**2
+        w = self.rhs_w
+        for a in range(3):
+            diffusion.explicit_step(self.q[a], w[a], beta, self.axes, self.free[a])
+            if scale != 0.0:
+                subtract_gradient(w[a], a, self.psi, self.free[a], self.periodic, scale)
+        self._fill(w)
+        self._carry(dt_h, w, self.work2, bounds=True, velocity=self.old)
+        self._fill(self.work2)
+        self._carry(-dt_h, self.work2, self.work, velocity=self.old)
+        for a in range(3):
+            advection.maccormack_correct_smooth(
+                w[a], self.work2[a], self.work[a], self.qmin[a], self.qmax[a], self.axes,
+                self.work[a],
+            )  # fmt: skip
+        # u^n becomes u^n-1 of the next step; the midpoint field is scratch from here
+        self.old, self.q, self.work = self.q, self.work, self.old
+        self._apply_boundaries(set_normal=True)
+        sweeps = self._diffuse(0.5 * dt)
+        self._pressure_scale = 1.0 if self._last_dt else 0.5
+        self._last_dt = dt
+        return sweeps
+
+    def _subgrid(self, dt) -> tuple[float, int]:
+        """Smagorinsky eddy diffusion, one explicit step (:mod:`.turbulence`); returns
+        (largest nu_t in m^2/s, cells capped for stability)."""
+        if self.nu_t is None:
+            return 0.0, 0
+        cap = EDDY_CAP / (2 * int(self.axes.sum())) * self.h**2 / dt
+        capped = turbulence.eddy_viscosity(
+            *self.q, self.solid, self.axes, self.h, self.smagorinsky, cap, self.nu_t
+        )
+        dt_h2 = dt / self.h**2
+        for a in range(3):
+            turbulence.eddy_diffusion(
+                self.q[a], a, self.nu_t, self.axes, dt_h2, self.free[a], self.work[a]
+            )
+        self.q, self.work = self.work, self.q
+        self._apply_boundaries(set_normal=True)
+        return float(self.nu_t.max()), int(capped)
 
     def _forces(self, dt):
         forced = bool(np.any(self.body_force != 0.0))
@@ -435,13 +543,21 @@ class NavierStokesWind(WindField):
 
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
+        self.time += dt
+        if self.fluctuations:  # the inflow of this step's end
+            self.planes = self._boundary_planes()
         marked = self._couple(obstacles)
         self._forces(dt)
+        nu_max, capped = self._subgrid(dt)
         t1 = time.perf_counter()
-        self._advect(dt)
-        t2 = time.perf_counter()
-        sweeps = self._diffuse(dt)
-        t3 = time.perf_counter()
+        if self.advection == "second_order":
+            sweeps = self._advect_diffuse_second_order(dt)
+            t2 = t3 = time.perf_counter()  # one phase: advect holds both
+        else:
+            self._advect(dt)
+            t2 = time.perf_counter()
+            sweeps = self._diffuse(dt)
+            t3 = time.perf_counter()
         iters, res, rhs_norm = self._project()
         t4 = time.perf_counter()
         peak, squares, count = divergence_norms(*self.q, self.target, self.solid)
@@ -456,6 +572,8 @@ class NavierStokesWind(WindField):
             "diffusion_sweeps": float(sweeps),
             "cfl": float(speed * dt / self.h),
             "cloth_cells": float(marked),
+            "eddy_viscosity_max": nu_max,
+            "eddy_viscosity_capped": float(capped),
             "couple_seconds": t1 - t0,
             "advect_seconds": t2 - t1,
             "diffuse_seconds": t3 - t2,

@@ -1,0 +1,115 @@
+"""Smagorinsky subgrid model (``wind.turbulence=smagorinsky``): the eddies a grid cannot
+resolve mix momentum like a viscosity that grows with the resolved strain,
+
+    nu_t = (C_s h)^2 |S|,   |S| = sqrt(2 S_ij S_ij),   S_ij = (d_i u_j + d_j u_i) / 2
+
+(Smagorinsky 1963; C_s = ``wind.smagorinsky_constant``, about 0.17 for isotropic
+turbulence, Lilly 1967), and adds du/dt = div(nu_t grad u) to the momentum equation,
+taken explicitly once per step (the transpose part div(nu_t grad u^T), zero for uniform
+nu_t, is left out). An explicit step is stable while nu_t dt / h^2 <= 1 / (2 d) with d
+active axes; nu_t is capped there (the count of capped cells is recorded) — at the CFL
+numbers of the wind scenes the cap is not reached, since nu_t dt / h^2 = C_s^2 |S| dt and
+|S| dt stays below the cell CFL number.
+
+Strain rates on the MAC grid at cell centres: diagonal terms from the cell's two faces,
+off-diagonal terms from central differences of cell-centred components (the ghost layer
+supplies the boundary values); solid cells have nu_t = 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from windbench.wind.navier_stokes.boundaries import cells_beside
+
+
+@njit(cache=True, inline="always")
+def _centre(q, a, i, j, k):
+    """Component a at the centre of cell (i, j, k) (one ghost cell beyond the grid)."""
+    if a == 0:
+        return 0.5 * (q[i + 1, j + 1, k + 1] + q[i + 2, j + 1, k + 1])
+    if a == 1:
+        return 0.5 * (q[i + 1, j + 1, k + 1] + q[i + 1, j + 2, k + 1])
+    return 0.5 * (q[i + 1, j + 1, k + 1] + q[i + 1, j + 1, k + 2])
+
+
+@njit(cache=True, parallel=True)
+def eddy_viscosity(u, v, w, solid, axes, h, constant, cap, out):
+    """out = min((C_s h)^2 |S|, cap) per cell (m^2/s), 0 in solids; returns how many
+    cells were capped. Derivatives along an inactive axis (``axes[b] = 0``) are zero."""
+    nx, ny, nz = solid.shape
+    capped = np.zeros(nx, dtype=np.int64)
+    scale = (constant * h) ** 2
+    for i in prange(nx):
+        for j in range(ny):
+            for k in range(nz):
+                if solid[i, j, k]:
+                    out[i, j, k] = 0.0
+                    continue
+                sxx = (u[i + 2, j + 1, k + 1] - u[i + 1, j + 1, k + 1]) * axes[0]
+                syy = (v[i + 1, j + 2, k + 1] - v[i + 1, j + 1, k + 1]) * axes[1]
+                szz = (w[i + 1, j + 1, k + 2] - w[i + 1, j + 1, k + 1]) * axes[2]
+                dudy = 0.5 * (_centre(u, 0, i, j + 1, k) - _centre(u, 0, i, j - 1, k)) * axes[1]
+                dudz = 0.5 * (_centre(u, 0, i, j, k + 1) - _centre(u, 0, i, j, k - 1)) * axes[2]
+                dvdx = 0.5 * (_centre(v, 1, i + 1, j, k) - _centre(v, 1, i - 1, j, k)) * axes[0]
+                dvdz = 0.5 * (_centre(v, 1, i, j, k + 1) - _centre(v, 1, i, j, k - 1)) * axes[2]
+                dwdx = 0.5 * (_centre(w, 2, i + 1, j, k) - _centre(w, 2, i - 1, j, k)) * axes[0]
+                dwdy = 0.5 * (_centre(w, 2, i, j + 1, k) - _centre(w, 2, i, j - 1, k)) * axes[1]
+                sxy = 0.5 * (dudy + dvdx)
+                sxz = 0.5 * (dudz + dwdx)
+                syz = 0.5 * (dvdz + dwdy)
+                ss = sxx * sxx + syy * syy + szz * szz + 2.0 * (sxy * sxy + sxz * sxz + syz * syz)
+                nu = scale * math.sqrt(2.0 * ss) / h  # differences are per cell: / h
+                if nu > cap:
+                    nu = cap
+                    capped[i] += 1
+                out[i, j, k] = nu
+    return capped.sum()
+
+
+@njit(cache=True, inline="always")
+def _face_nu(nu, I, J, K, a):
+    """nu_t at face (I, J, K) of component a: the mean of its two cells (one if the other
+    lies outside the grid)."""
+    nx, ny, nz = nu.shape
+    ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
+    plus = 0 <= ip < nx and 0 <= jp < ny and 0 <= kp < nz
+    minus = 0 <= im < nx and 0 <= jm < ny and 0 <= km < nz
+    if plus and minus:
+        return 0.5 * (nu[ip, jp, kp] + nu[im, jm, km])
+    if plus:
+        return nu[ip, jp, kp]
+    if minus:
+        return nu[im, jm, km]
+    return 0.0
+
+
+@njit(cache=True, parallel=True)
+def eddy_diffusion(q, a, nu, axes, dt_h2, free, out):
+    """out = q + dt/h^2 sum_b [nu_+ (q_+b - q) - nu_- (q - q_-b)] on the free faces of
+    component a (nu between two faces: the mean of theirs), out = q elsewhere."""
+    P0, P1, P2 = q.shape
+    for I in prange(P0):
+        for J in range(P1):
+            for K in range(P2):
+                out[I, J, K] = q[I, J, K]
+    for I in prange(1, P0 - 1):
+        for J in range(1, P1 - 1):
+            for K in range(1, P2 - 1):
+                if not free[I, J, K]:
+                    continue
+                qc = q[I, J, K]
+                nc = _face_nu(nu, I, J, K, a)
+                flux = 0.0
+                for b in range(3):
+                    if axes[b] == 0:
+                        continue
+                    e0, e1, e2 = int(b == 0), int(b == 1), int(b == 2)
+                    n_plus = 0.5 * (nc + _face_nu(nu, I + e0, J + e1, K + e2, a))
+                    n_minus = 0.5 * (nc + _face_nu(nu, I - e0, J - e1, K - e2, a))
+                    flux += n_plus * (q[I + e0, J + e1, K + e2] - qc)
+                    flux -= n_minus * (qc - q[I - e0, J - e1, K - e2])
+                out[I, J, K] = qc + dt_h2 * flux
