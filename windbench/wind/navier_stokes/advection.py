@@ -12,7 +12,7 @@ and q(x - d) interpolated trilinearly in q's padded lattice (ghost layer filled 
 interpolated from the staggered components) and every face takes the mean of the
 displacements of the two cells it separates (:func:`advect`). For a linear velocity field this is exactly the
 RK2 backtrace of the face itself (d is then linear in x; tested); for a smooth one it
-differs from it by O(h^2), so the scheme stays second order in space and time. Backtraced
+differs from it by O(h^2), so the backtrace stays second order. Backtraced
 points leaving the domain are wrapped on periodic axes and clamped onto the boundary
 otherwise, where the ghost layer gives the wall/inflow value; midpoints of the ghost cells
 beyond a non-periodic face read the ghost layer (the boundary condition's extension).
@@ -22,16 +22,9 @@ of the eight lattice values that the forward backtrace interpolated from (the li
 keeps it stable, :func:`maccormack_correct`), or clamped only where q is not smooth
 (:func:`maccormack_correct_smooth`, the second-order scheme's limiter).
 
-Cost. Positions are cell coordinates and velocities cells per step, so a face needs no
-division. Backtracing every face separately took three interpolations of the velocity per
-face (45 ns per face on one core at 64^3, fence, CPU time); once per cell centre it takes
-three per cell, about one per face, and the face step is one interpolation of q plus a
-two-point mean: 25 ns per face (measured A/B in one process, the same grid and field).
-The three components are carried in one pass over the planes, the displacements kept in
-a two-plane ring per thread rather than stored as a field (:func:`advect`): the same bits,
-advection 11.7 -> 10.7 ms per step at 64^3 and 83.9 -> 72.9 ms at 128^3 (two threads,
-medians over 28 and 14 steps of the fence, the two versions side by side in one
-process), and three float64 values per cell less.
+Positions are cell coordinates and velocities cells per step. The three components are
+carried in one pass over the planes, the displacements kept in a two-plane ring per thread
+(:func:`advect`) rather than stored as a field.
 """
 
 from __future__ import annotations

@@ -2,61 +2,38 @@
 (paper §4.1.2), on the scene's grid of cubic cells (physical sizes, SI units).
 
 Equations (4.1)-(4.2): div u = 0, du/dt = -(u . grad) u - grad p / rho + nu lap u + f.
-One step of ``dt`` (operator splitting, each operator in its own module):
+One step of ``dt``, each operator in its own module:
 
 1. cloth coupling, "prior to any other operation" (:mod:`.coupling`, ``wind.coupling``);
-2. body forces: ``wind.body_force`` (m/s^2) and the interior flow primitives (vortex,
-   source, sink) relaxing the air toward their own field w_i inside their core,
-   u += (1 - exp(-k dt)) chi_i (w_i - u), chi_i = exp(-(d/r_c)^2), k =
-   ``wind.source_relaxation`` (1/s), r_c = max(core_radius, h); a source/sink also
-   emits its volume m (m^3/s) as a divergence spread over its core in the projection;
-3. advection (:mod:`.advection`): semi-Lagrangian with an RK2 backtrace (once per cell
-   centre, faces take the mean of their two cells' displacements), or limited
-   MacCormack (``wind.advection``);
-4. implicit diffusion with kinematic viscosity ``wind.viscosity`` (:mod:`.diffusion`: a
-   Jacobi sweep from the advected field, then Gauss-Seidel until the error bound);
-5. pressure projection to the relative residual ``wind.pressure_tol`` (:mod:`.pressure`,
-   multigrid-preconditioned CG whose iteration count does not grow with resolution).
+2. forces (:mod:`.forcing`): ``wind.body_force`` and the interior flow primitives; a
+   source or sink also emits its volume as a divergence target of the projection;
+3. eddy viscosity of the mean flow, ``wind.turbulence`` (:mod:`.turbulence`): Prandtl's
+   mixing length over the ground (default), Smagorinsky's subgrid model, or none;
+4. advection (:mod:`.advection`) and viscosity (:mod:`.diffusion`), ``wind.advection``:
+   ``semi_lagrangian`` (the paper's scheme: RK2 backtrace, trilinear interpolation) or
+   limited ``maccormack``, each followed by implicit (backward Euler) viscosity — first
+   order in time; or ``second_order``, the trapezoidal rule along the characteristics
+   (:meth:`NavierStokesWind._advect_diffuse_second_order`), second order in space and time;
+5. projection to the relative residual ``wind.pressure_tol`` (:mod:`.projection`, solved
+   by multigrid-preconditioned CG, :mod:`.multigrid`).
 
-Grid: MAC (staggered). Velocity component a lives on the centres of the faces normal to
-axis a; pressure at cell centres. Chosen because (i) the discrete divergence and
-gradient are adjoint, so the projection is an exact orthogonal projection (idempotent,
-divergence zero to the solver tolerance) with the compact 7-point Laplacian, free of the
-checkerboard modes of a collocated grid; (ii) "no flux through a wall" is simply a
-prescribed face velocity, so bodies, walls and cloth-blocked faces are face weights of
-the same Poisson matrix. The paper keeps all values at cell centres; ``velocity()``
-returns cell-centred values (mean of the two faces per axis, zero in solid cells) and
-``sample()`` interpolates those trilinearly, like every other backend.
+MAC grid: component a on the faces normal to axis a, pressure at cell centres, so that
+divergence and gradient are adjoint (the projection is an orthogonal projection free of
+checkerboard modes) and walls, bodies and cloth-blocked faces are prescribed face
+velocities. ``velocity()`` returns cell-centred values (the mean of two faces, zero in
+solid cells), which ``sample()`` interpolates trilinearly like every other backend.
 
-Boundaries (:mod:`.boundaries`): per face of ``scene.boundary``. Inflow value: the
-superposed scene sources evaluated at the face, where a *uniform* source counts only at
-faces it blows in through (U . n_out < 0), so ``opposing_sources`` (+U and -U) gets +U
-through x_min and -U through x_max; vortices, sources and sinks count at every inflow
-face. If a domain has no outflow face but its inflow carries a net volume flux (again
-``opposing_sources``), incompressibility has no solution with prescribed inflow; its
-inflow faces then become *openings*: the inflow velocity is imposed before each
-projection and the pressure there is zero, so air enters only as far as it can leave.
+Boundaries (:mod:`.boundaries`): inflow faces take the superposed sources (a uniform
+source only where it blows in, with its inflow ``turbulence`` if it has one:
+:mod:`windbench.wind.fluctuation`); a domain without an outflow face whose inflow carries
+a net volume flux turns its inflow faces into openings (pressure zero). The initial
+field is the superposed sources, zero at bodies, projected. Cells whose centre lies in a
+rigid body are solid: every face touching one has zero velocity (the paper's interior
+check).
 
-Initial condition: the superposed field of all sources at the faces, zero on faces
-touching a body, then projected (divergence-free from the first step; a scene without
-sources starts at rest).
-
-Defaults (``conf/wind/navier_stokes.yaml``): ``advection=semi_lagrangian`` (the paper's
-scheme, cheapest; ``maccormack`` is 3-30x less dissipative, see
-``experiments/validation_ns/README.md``), ``coupling=paper`` (§4.1.2 as written; cheap,
-but air still crosses a flag through the pressure solve — ``projection`` closes it).
-
-Figures per step (``stats()``): ``pressure_iterations``, ``pressure_residual`` (relative),
-``pressure_rhs_norm`` (||h div u*||_2 before the projection, m/s), ``mac_divergence_max``/
-``_rms`` (|div u| h / U_ref of the MAC divergence on air cells, which is what the
-projection zeroes; :meth:`divergence` gives the field to the loop), ``diffusion_sweeps``,
-``cfl``, ``cloth_cells`` (cells marked by cloth) and the phases ``couple``, ``advect``,
-``diffuse``, ``project`` (``*_seconds``).
-
-Rigid bodies: cells whose centre is inside a body (base-class ``solid_mask()``; thin
-``resolve=False`` poles mostly miss every centre) are solid: every face touching one has
-zero velocity, so nothing flows through a body and no velocity is ever assigned inside
-one (the paper's interior check).
+Figures per step (``stats()``): pressure iterations, residual and right-hand side, the
+MAC divergence on air cells, diffusion sweeps, CFL, cells marked by cloth, the largest
+eddy viscosity and its substeps, and the phases couple, advect, diffuse, project.
 """
 
 from __future__ import annotations
@@ -102,8 +79,7 @@ from windbench.wind.registry import WindConfig, register_backend
 
 ADVECTION = ("semi_lagrangian", "maccormack", "second_order")
 COUPLING = ("none", "paper", "projection")
-TURBULENCE = ("none", "smagorinsky")
-EDDY_CAP = 0.9  # explicit eddy diffusion: nu_t dt / h^2 <= EDDY_CAP / (2 d)
+TURBULENCE = ("none", "smagorinsky", "mixing_length")
 DIFFUSION_MAX_SWEEPS = 500
 
 
@@ -112,7 +88,7 @@ class NavierStokesConfig(WindConfig):
     """``wind.*`` keys of the Navier-Stokes backend (paper §4.1)."""
 
     name: str = "navier_stokes"
-    advection: str = "semi_lagrangian"  # semi_lagrangian | maccormack
+    advection: str = "semi_lagrangian"  # semi_lagrangian | maccormack | second_order
     viscosity: float = 1.5e-5  # kinematic, m^2/s (air)
     pressure_tol: float = 1e-6  # relative residual of the projection
     pressure_max_iterations: int = 200
@@ -120,24 +96,28 @@ class NavierStokesConfig(WindConfig):
     source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
     coupling: str = "paper"  # none | paper | projection (paper §4.1.2)
     body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
-    turbulence: str = "none"  # none | smagorinsky (subgrid eddy viscosity)
+    turbulence: str = "mixing_length"  # none | smagorinsky | mixing_length (eddy viscosity)
     smagorinsky_constant: float = 0.17  # C_s of nu_t = (C_s h)^2 |S|
+    mixing_length_limit: float = 10.0  # m, lambda of Blackadar's 1/l = 1/(kappa z) + 1/lambda
     seed: int = 0  # synthetic inflow turbulence (conf/wind/navier_stokes.yaml sets ${seed})
 
 
 def _check(params):
-    name = str(params.get("advection", "semi_lagrangian"))
+    name = str(params.get("advection"))
     if name not in ADVECTION:
         raise ConfigError("wind.advection", f"must be one of {list(ADVECTION)}, got {name!r}")
-    name = str(params.get("coupling", "paper"))
+    name = str(params.get("coupling"))
     if name not in COUPLING:
         raise ConfigError("wind.coupling", f"must be one of {list(COUPLING)}, got {name!r}")
-    name = str(params.get("turbulence", "none"))
+    name = str(params.get("turbulence"))
     if name not in TURBULENCE:
         raise ConfigError("wind.turbulence", f"must be one of {list(TURBULENCE)}, got {name!r}")
-    cs = float(params.get("smagorinsky_constant", 0.17))
+    cs = float(params.get("smagorinsky_constant"))
     if not (np.isfinite(cs) and 0 < cs < 1):
         raise ConfigError("wind.smagorinsky_constant", f"must lie in (0, 1), got {cs}")
+    limit = float(params.get("mixing_length_limit"))
+    if not (np.isfinite(limit) and limit > 0):
+        raise ConfigError("wind.mixing_length_limit", f"must be a length > 0 m, got {limit}")
     for key in ("viscosity", "source_relaxation"):
         val = float(params.get(key))
         if not (np.isfinite(val) and val >= 0):
@@ -177,7 +157,6 @@ class NavierStokesWind(WindField):
         self.max_iterations = int(params.pressure_max_iterations)
         self.relaxation = float(params.source_relaxation)
         self.turbulence = str(params.turbulence)
-        self.smagorinsky = float(params.smagorinsky_constant)
         self.time = 0.0
         self.fluctuations = [
             (s, Fluctuation.build(*s.turbulence, s.velocity, int(params.seed) + i))
@@ -227,7 +206,11 @@ class NavierStokesWind(WindField):
         self._set_weights()
         self.psi = np.zeros(shape)
         self.rhs = np.zeros(shape)
-        self.nu_t = np.zeros(shape) if self.turbulence == "smagorinsky" else None
+        self.nu_t = np.zeros(shape) if self.turbulence != "none" else None
+        self.length2 = turbulence.mixing_lengths(
+            self.turbulence, shape, self.h, float(params.smagorinsky_constant),
+            float(params.mixing_length_limit),
+        )  # fmt: skip
         self._u_cell = np.zeros((*shape, 3))
         self._cell_valid = False
         self._stats: dict[str, float] = {}
@@ -407,23 +390,24 @@ class NavierStokesWind(WindField):
         self._last_dt = dt
         return sweeps
 
-    def _subgrid(self, dt) -> tuple[float, int]:
-        """Smagorinsky eddy diffusion, one explicit step (:mod:`.turbulence`); returns
-        (largest nu_t in m^2/s, cells capped for stability)."""
+    def _eddy_diffusion(self, dt) -> tuple[float, int]:
+        """Eddy viscosity of the mean flow (:mod:`.turbulence`), explicit substeps;
+        returns (largest nu_t in m^2/s, substeps taken)."""
         if self.nu_t is None:
             return 0.0, 0
-        cap = EDDY_CAP / (2 * int(self.axes.sum())) * self.h**2 / dt
-        capped = turbulence.eddy_viscosity(
-            *self.q, self.solid, self.axes, self.h, self.smagorinsky, cap, self.nu_t
-        )
-        dt_h2 = dt / self.h**2
-        for a in range(3):
-            turbulence.eddy_diffusion(
-                self.q[a], a, self.nu_t, self.axes, dt_h2, self.free[a], self.work[a]
-            )
-        self.q, self.work = self.work, self.q
-        self._apply_boundaries(set_normal=True)
-        return float(self.nu_t.max()), int(capped)
+        turbulence.eddy_viscosity(*self.q, self.solid, self.axes, self.h, self.length2, self.nu_t)
+        peak = float(self.nu_t.max())
+        stable = turbulence.SUBSTEP_LIMIT / (2 * int(self.axes.sum()))
+        substeps = max(1, int(np.ceil(peak * dt / self.h**2 / stable)))
+        dt_h2 = dt / substeps / self.h**2
+        for _ in range(substeps):
+            for a in range(3):
+                turbulence.eddy_diffusion(
+                    self.q[a], a, self.nu_t, self.axes, dt_h2, self.free[a], self.work[a]
+                )
+            self.q, self.work = self.work, self.q
+            self._apply_boundaries(set_normal=True)
+        return peak, substeps
 
     def _forces(self, dt):
         forced = bool(np.any(self.body_force != 0.0))
@@ -548,7 +532,7 @@ class NavierStokesWind(WindField):
             self.planes = self._boundary_planes()
         marked = self._couple(obstacles)
         self._forces(dt)
-        nu_max, capped = self._subgrid(dt)
+        nu_max, substeps = self._eddy_diffusion(dt)
         t1 = time.perf_counter()
         if self.advection == "second_order":
             sweeps = self._advect_diffuse_second_order(dt)
@@ -573,7 +557,7 @@ class NavierStokesWind(WindField):
             "cfl": float(speed * dt / self.h),
             "cloth_cells": float(marked),
             "eddy_viscosity_max": nu_max,
-            "eddy_viscosity_capped": float(capped),
+            "eddy_substeps": float(substeps),
             "couple_seconds": t1 - t0,
             "advect_seconds": t2 - t1,
             "diffuse_seconds": t3 - t2,

@@ -1,19 +1,17 @@
-"""The small coarse levels of the pressure multigrid (:mod:`.pressure`), run as one compiled
+"""The small coarse levels of the pressure multigrid (:mod:`.multigrid`), run as one compiled
 call per visit.
 
-On the levels below ``pressure.SERIAL_CELLS`` cells a thread start costs more than the
-work, and so did everything around the arithmetic: a kernel call per level and smoothing
-pass (about 150 calls per step at 64^3, 5-7 us each before any work) and, inside the row
-kernels, the per-row set-up (neighbour views, the two end cells), which on rows of 4-16
-cells cost 11-27 ns per cell update against 1.5 ns on the fine level. Here those levels
+On the levels below ``multigrid.SERIAL_CELLS`` cells a thread start, a kernel call per
+level and smoothing pass, and the per-row set-up of the row kernels cost more than the
+arithmetic. Here those levels
 share flat float32 arrays in natural (C) order, one block per level, and every cell
 carries the global indices of its six neighbours (wrapped on periodic axes; beyond a
 non-periodic face the *zero slot*, the last element, which stays 0: the ghost x = 0 of
-:mod:`.pressure`), its six face weights (coarse weights with their (h/H)^2 factor), its
+:mod:`.multigrid`), its six face weights (coarse weights with their (h/H)^2 factor), its
 diagonal and 1/diagonal. One call (:func:`run_cycle`) then runs the whole cycle below a
 level from a schedule written once (:func:`schedule`).
 
-The arithmetic is that of :mod:`.pressure` (McAdams et al. 2010 as used there): red-black
+The arithmetic is that of :mod:`.multigrid` (McAdams et al. 2010 as used there): red-black
 Gauss-Seidel x_c <- x_c + OMEGA ((b_c + sum_f w_f x_nb) / diag_c - x_c) on cells with an
 open face (cells without one are left alone), the residual b - A x restricted to the parent
 cell as the mean of its children, the coarse correction prolonged by injection; the

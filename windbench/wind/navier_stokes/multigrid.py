@@ -1,61 +1,35 @@
-"""Pressure projection (paper §4.1.1, the Helmholtz-Hodge step of Stam 1999/2003):
-conjugate gradients preconditioned by one geometric multigrid cycle (MGPCG, McAdams,
-Sifakis and Teran 2010), on a face-weighted cell mask.
+"""The Poisson solve of the projection (paper §4.1.1, the Helmholtz-Hodge step of Stam
+1999): conjugate gradients preconditioned by one geometric multigrid cycle (MGPCG,
+McAdams, Sifakis and Teran 2010), on a face-weighted cell mask.
 
 The unknown is psi = p dt / (rho h) on cell centres; the projected face velocity is
-u_f - (psi_+ - psi_-). Each face carries a weight w_f in {0, 1}: 1 where air may cross
-(both sides air, the face not blocked by cloth), 0 where the normal velocity is prescribed
-(walls, inflow, bodies, cloth). Outflow/opening faces have w = 1 and a ghost psi = 0
-(pressure zero outside). Zero divergence in every air cell then reads
+u_f - (psi_+ - psi_-). Each face carries a weight w_f in {0, 1}: 1 where air may cross,
+0 where the normal velocity is prescribed (walls, inflow, bodies, cloth); outflow and
+opening faces have w = 1 and a ghost psi = 0. Zero divergence in every air cell reads
 
     (A psi)_c = sum_faces w_f (psi_c - psi_nb) = b_c = -(sum of outward face velocities)_c,
 
-a symmetric positive (semi-)definite system. Changing which faces are open is only a
-rewrite of the weight arrays, so bodies and cloth may change every step at the cost of
-one O(cells) pass (:func:`MultigridPoisson.set_weights`).
+a symmetric positive (semi-)definite system; changing which faces are open only rewrites
+the weights (:meth:`MultigridPoisson.set_weights`).
 
-Multigrid: cell-centred, axes with an even number (>= 4) of cells halved per level;
-coarse face weight = mean of the fine face weights it covers, operator re-discretised
-with the coarse spacing (coefficient (h/H)^2 per axis); restriction = mean of the
-children, prolongation = injection (the transpose up to the factor 8), red-black
-successive over-relaxation smoothing, x_c += omega ((b_c + sum_f w_f x_nb) / diag - x_c)
-with omega = ``OMEGA`` = 1.1 on the coarse levels and ``FINE_OMEGA`` = 1 (Gauss-Seidel) on
-the finest (two sweeps down, the same in reverse order up, so the cycle is a symmetric
-positive definite preconditioner as CG needs, for any 0 < omega < 2). The coarsest level
-gets many symmetric sweeps. The first two coarse levels correct twice from the next level
-(a W there, ``W_LEVELS``), the others once (a V): 5.00 / 5.00 / 5.07 iterations per step
-at 32^3 / 64^3 / 128^3 on the fence (mean over 29 steps of ``experiment=scaling``). The
-whole cycle runs in single precision (``PRECONDITIONER_DTYPE``) while CG stays in double: the
-same iteration counts and a pressure within 1e-8 (relative) of an all-float64 solve, in
-15% less time at 128^3 on one core (A/B in one process; tested: it still reaches a
-relative residual of 1e-10).
+Multigrid: cell-centred, axes with an even number (>= 4) of cells halved per level; the
+coarse face weight is the mean of the fine ones it covers, the operator re-discretised
+with the coarse spacing (coefficient (h/H)^2 per axis); restriction is the mean of the
+children, prolongation injection (its transpose up to a factor 8); red-black successive
+over-relaxation x_c += omega ((b_c + sum_f w_f x_nb) / diag - x_c), omega = ``OMEGA`` on
+the coarse levels and ``FINE_OMEGA`` = 1 on the finest, the same sweeps in reverse order on
+the way up, so that the cycle is the symmetric positive definite preconditioner CG needs.
+The first coarse levels correct twice (a W, ``W_LEVELS``), the others once (a V); the
+cycle runs in single precision (``PRECONDITIONER_DTYPE``), CG in double. The levels below
+``SERIAL_CELLS`` cells run as one compiled call on flat tables (:mod:`.coarse_levels`).
 
-Speed: the kernels work row by row along z. A row's x and y neighbour rows are found
-once, as views (wrapped on periodic axes; beyond a wall or an opening another row, with
-coefficient 0: the ghost x = 0), so each cell is plain contiguous reads. Each row is
-classified once per weight change (:func:`classify_rows`): ALL_OPEN rows (most of the
-air) use the constant 7-point stencil without reading any weight, ROW_CONSTANT rows (the
-rows along the domain faces, coarse rows of constant fractional weights) per-row
-coefficients, GENERAL rows (cut by a body or cloth) the face weights cell by cell; the two
-end cells of every row take their coefficients from a compact table. The classes run in
-loops of their own, the ALL_OPEN rows with neighbour views taken without a condition,
-which made the smoother about 1.3 times as fast as one loop over all rows (2.7 -> 2.05 ns
-per cell update at 64^3, one core, A/B); the ROW_CONSTANT class (the domain-face rows had
-gone through the weighted loop) took the projection from 28.7 to 26.1 ms at 64^3 and
-from 211 to 196 ms at 128^3 (one core, minimum of 12 and 8 steps, A/B in one process; the
-operator gives the same bits, the smoother's fast-math float32 rounding differs: the
-velocity 3.6e-13 apart, relative, after 22 steps at 32^3). Stores
-are written out in the loops: numba made a loop with an inlined storing helper three to
-four times slower. The
-levels below ``SERIAL_CELLS`` cells run as one compiled call per visit on flat per-cell
-tables (:mod:`.coarse_levels`): there the calls and the per-row set-up, not the arithmetic,
-had cost the time (projection 11.3 -> 8.8 ms at 32^3, 31.7 -> 28.0 ms at 64^3, one core,
-A/B in one process). CG's vector
-updates are fused (:func:`cg_update`) and every reduction sums by planes, then over planes
-in order, so the numbers do not depend on the thread count. Without any pressure boundary (all
-walls/periodic) the constant is removed from the right-hand side and from every
-preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2 (relative residual),
-warm-started from the previous step's pressure.
+The kernels work row by row along z, with each row classified once per weight change
+(:func:`classify_rows`): ALL_OPEN rows use the constant 7-point stencil, ROW_CONSTANT rows
+per-row coefficients, GENERAL rows the face weights cell by cell. Every reduction sums by
+planes, then over the planes in order (:func:`ordered_sum`), so the numbers do not
+depend on the thread count. Without any pressure boundary the constant is removed from
+the right-hand side and each preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2,
+warm-started from the previous step's psi.
 """
 
 from __future__ import annotations

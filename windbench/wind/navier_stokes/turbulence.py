@@ -1,15 +1,21 @@
-"""Smagorinsky subgrid model (``wind.turbulence=smagorinsky``): the eddies a grid cannot
-resolve mix momentum like a viscosity that grows with the resolved strain,
+"""Eddy viscosity (``wind.turbulence``): turbulent eddies mix momentum like a viscosity
+that grows with the strain of the mean flow,
 
-    nu_t = (C_s h)^2 |S|,   |S| = sqrt(2 S_ij S_ij),   S_ij = (d_i u_j + d_j u_i) / 2
+    nu_t = l^2 |S|,   |S| = sqrt(2 S_ij S_ij),   S_ij = (d_i u_j + d_j u_i) / 2,
 
-(Smagorinsky 1963; C_s = ``wind.smagorinsky_constant``, about 0.17 for isotropic
-turbulence, Lilly 1967), and adds du/dt = div(nu_t grad u) to the momentum equation,
-taken explicitly once per step (the transpose part div(nu_t grad u^T), zero for uniform
-nu_t, is left out). An explicit step is stable while nu_t dt / h^2 <= 1 / (2 d) with d
-active axes; nu_t is capped there (the count of capped cells is recorded) — at the CFL
-numbers of the wind scenes the cap is not reached, since nu_t dt / h^2 = C_s^2 |S| dt and
-|S| dt stays below the cell CFL number.
+with the mixing length l of one of two closures:
+
+- ``smagorinsky``: l = C_s h, the eddies smaller than a cell (Smagorinsky 1963; C_s =
+  ``wind.smagorinsky_constant``, about 0.17 for isotropic turbulence, Lilly 1967): a
+  subgrid model that vanishes as the grid is refined;
+- ``mixing_length``: Prandtl's l = kappa z near the ground (z the height above the domain's
+  lowest face), limited aloft as 1/l = 1/(kappa z) + 1/lambda (Blackadar 1962; lambda =
+  ``wind.mixing_length_limit``): the turbulence of the atmospheric surface layer, a
+  Reynolds-averaged closure whose wind is the time mean of the turbulent one.
+
+The term du/dt = div(nu_t grad u) (the transpose part div(nu_t grad u^T), zero for uniform
+nu_t, is left out) is taken explicitly, in as many equal substeps as keep
+nu_t dt / h^2 <= SUBSTEP_LIMIT / (2 d) (d active axes): stable at any nu_t.
 
 Strain rates on the MAC grid at cell centres: diagonal terms from the cell's two faces,
 off-diagonal terms from central differences of cell-centred components (the ghost layer
@@ -36,13 +42,26 @@ def _centre(q, a, i, j, k):
     return 0.5 * (q[i + 1, j + 1, k + 1] + q[i + 1, j + 1, k + 2])
 
 
+SUBSTEP_LIMIT = 0.9
+
+
+def mixing_lengths(mode: str, shape, h: float, constant: float, limit: float) -> np.ndarray:
+    """l^2 per cell layer along z (m^2) of the closure ``mode`` (module docstring)."""
+    if mode == "smagorinsky":
+        return np.full(shape[2], (constant * h) ** 2)
+    z = (np.arange(shape[2]) + 0.5) * h
+    length = 1.0 / (1.0 / (KARMAN * z) + 1.0 / limit)
+    return length**2
+
+
+KARMAN = 0.41  # von Karman's constant
+
+
 @njit(cache=True, parallel=True)
-def eddy_viscosity(u, v, w, solid, axes, h, constant, cap, out):
-    """out = min((C_s h)^2 |S|, cap) per cell (m^2/s), 0 in solids; returns how many
-    cells were capped. Derivatives along an inactive axis (``axes[b] = 0``) are zero."""
+def eddy_viscosity(u, v, w, solid, axes, h, length2, out):
+    """out = l^2 |S| per cell (m^2/s), l^2 = ``length2[k]`` of the cell's layer, 0 in
+    solids. Derivatives along an inactive axis (``axes[b] = 0``) are zero."""
     nx, ny, nz = solid.shape
-    capped = np.zeros(nx, dtype=np.int64)
-    scale = (constant * h) ** 2
     for i in prange(nx):
         for j in range(ny):
             for k in range(nz):
@@ -62,29 +81,23 @@ def eddy_viscosity(u, v, w, solid, axes, h, constant, cap, out):
                 sxz = 0.5 * (dudz + dwdx)
                 syz = 0.5 * (dvdz + dwdy)
                 ss = sxx * sxx + syy * syy + szz * szz + 2.0 * (sxy * sxy + sxz * sxz + syz * syz)
-                nu = scale * math.sqrt(2.0 * ss) / h  # differences are per cell: / h
-                if nu > cap:
-                    nu = cap
-                    capped[i] += 1
-                out[i, j, k] = nu
-    return capped.sum()
+                out[i, j, k] = length2[k] * math.sqrt(2.0 * ss) / h  # differences per cell: / h
+
+
+@njit(cache=True, inline="always")
+def _clamp(i, n):
+    return min(max(i, 0), n - 1)
 
 
 @njit(cache=True, inline="always")
 def _face_nu(nu, I, J, K, a):
-    """nu_t at face (I, J, K) of component a: the mean of its two cells (one if the other
-    lies outside the grid)."""
+    """nu_t at face (I, J, K) of component a (ghosts included): the mean of its two cells,
+    a cell beyond the grid replaced by the nearest one inside (nu_t extends unchanged)."""
     nx, ny, nz = nu.shape
     ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
-    plus = 0 <= ip < nx and 0 <= jp < ny and 0 <= kp < nz
-    minus = 0 <= im < nx and 0 <= jm < ny and 0 <= km < nz
-    if plus and minus:
-        return 0.5 * (nu[ip, jp, kp] + nu[im, jm, km])
-    if plus:
-        return nu[ip, jp, kp]
-    if minus:
-        return nu[im, jm, km]
-    return 0.0
+    plus = nu[_clamp(ip, nx), _clamp(jp, ny), _clamp(kp, nz)]
+    minus = nu[_clamp(im, nx), _clamp(jm, ny), _clamp(km, nz)]
+    return 0.5 * (plus + minus)
 
 
 @njit(cache=True, parallel=True)
