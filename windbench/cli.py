@@ -265,8 +265,11 @@ def composition_error(err: Exception) -> ConfigError:
     key = next((ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("full_key:")), "")
     message = lines[0] if lines else type(err).__name__
     conversion = re.match(r"Value '(.*)' of type '\w+' could not be converted to (\w+)", message)
+    boolean = re.match(r"Value '(.*)' is not a valid bool", message)
     if conversion and conversion.group(2) in CONVERSIONS:
         message = f"must be {CONVERSIONS[conversion.group(2)]}, got {conversion.group(1)!r}"
+    elif boolean:
+        message = f"must be true or false, got {boolean.group(1)!r}"
     elif message.startswith("Key '") and " not in '" in message:
         message += _allowed_keys(err)
     return ConfigError(key or "config", message + source)

@@ -265,7 +265,9 @@ def check_finite(node, prefix: str = "") -> None:
 def check_values(cfg) -> None:
     """ConfigError for the first non-finite number or out-of-range :func:`setting` in ``cfg``
     (types are already checked by the schema when the config is composed)."""
-    check_finite(cfg)
+    for key in cfg:
+        if key != "hydra":  # Hydra's own node (when composed with it) is not a run setting
+            check_finite(cfg[key], f"{key}.")
     for key, f in schema_fields():
         value = OmegaConf.select(cfg, key, default=None)
         if value is not None and not _in_range(value, f.metadata):
