@@ -115,7 +115,10 @@ def test_sigkill_during_a_write_leaves_no_corrupt_dataset(tmp_path, delay):
 @pytest.mark.parametrize(
     "overrides, message",
     [
-        (["grid.resolution=4000"], r"grid.resolution: 4000 gives .* cells: the run would need about .* GiB"),
+        (
+            ["grid.resolution=4000"],
+            r"grid.resolution: 4000 gives .* cells: the run would need about .* GiB",
+        ),
         (["sim.dt=5", "sim.duration=10"], r"sim.dt: 5.0 s lets the wind .* cross the whole domain"),
         (
             ["scene=fence", "scene.bodies.0.min=[9,0,0]", "scene.bodies.0.max=[10,4,2]"],
