@@ -334,12 +334,3 @@ def _blocks(shape: tuple[int, ...], itemsize: int):
 def read(path) -> xr.Dataset:
     """Open a run dataset (lazily; :func:`verify` checks it whole)."""
     return xr.open_dataset(path, engine="netcdf4")
-
-
-def is_complete(path) -> bool:
-    """True if ``path`` is a readable dataset whose status is ``complete``."""
-    try:
-        with xr.open_dataset(path, engine="netcdf4") as ds:
-            return ds.attrs.get("status") == "complete"
-    except (OSError, ValueError, KeyError):
-        return False

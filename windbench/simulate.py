@@ -87,7 +87,8 @@ def prepare(cfg: DictConfig) -> RunSetup:
     scene = build_scene(cfg.scene)
     grid = Grid.from_domain(scene.lower, scene.upper, int(cfg.grid.resolution))  # no arrays yet
     model = ClothModel.from_meshes(scene.cloths)
-    _check_memory(memory_plan(cfg, scene, grid, model, n_steps))
+    plan = memory_plan(cfg, scene, grid, model, n_steps)
+    _check_memory(plan)
     _check_bodies_resolved(scene, grid)
     for probe in ("lee", "free_stream"):
         _require(
@@ -96,12 +97,7 @@ def prepare(cfg: DictConfig) -> RunSetup:
             "is required when a scene has probes (lee and free_stream go together)",
         )
     backend.check(scene, grid, cfg.wind)
-    _check_memory(
-        {
-            **memory_plan(cfg, scene, grid, model, n_steps),
-            **backend.memory(scene, grid, cfg.wind, dt),
-        }
-    )
+    _check_memory({**plan, **backend.memory(scene, grid, cfg.wind, dt)})
     cfl = _check_cfl(scene, grid, dt, backend)
     snaps = np.unique(np.round(np.linspace(0, n_steps, cfg.output.snapshots + 1)[1:]).astype(int))
     make_cloth_solver(cfg.cloth, model, scene.bodies)  # unknown solver or material: fail now

@@ -48,7 +48,7 @@ import xarray as xr
 from omegaconf import OmegaConf
 
 from windbench.config import schema_fields
-from windbench.dataset import CONVENTIONS, code_version, verify
+from windbench.dataset import CONVENTIONS, VARIABLES, code_version, verify
 from windbench.errors import DatasetUnreadable
 
 RUN_FILE = "windbench.nc"
@@ -81,7 +81,7 @@ FIGURES: dict[str, tuple[str, str | None]] = {
     "experiment": ("experiment of the run", None),
     "path": ("run dataset file", None),
     "code": ("code version that made the run", None),
-    "phase": ("phase of the step", None),
+    "phase": VARIABLES["phase"],
     "wind": ("wind backend", None),
     "scene": ("scene", None),
     "resolution": ("grid cells along the longest domain axis", "1"),
