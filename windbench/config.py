@@ -112,8 +112,23 @@ class ClothConfig:
 
 
 @dataclass
+class FramesConfig:
+    """What the report's animations need (``output.frames``), kept every ``interval`` s.
+
+    A frame holds a horizontal slice of the wind at height ``height``, the aerodynamic force
+    on every cloth triangle and, with a backend that tracks arrival (particles), which cells
+    of the slice the wind has reached; the cloth itself is kept every step
+    (``cloth_position``).
+    """
+
+    interval: float = 0.0  # s of simulated time between frames (whole steps); 0: no frames
+    height: float | None = None  # m, z of the wind slice; null: the lee box's centre
+
+
+@dataclass
 class OutputConfig:
     snapshots: int = 4  # wind snapshots kept (evenly spaced, last one at the end)
+    frames: FramesConfig = field(default_factory=FramesConfig)
     probe_points: int = 6  # lee/free-stream probe lattice: points per axis
     filename: str = "windbench.nc"
 
