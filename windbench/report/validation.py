@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
+from matplotlib.ticker import NullFormatter
 from omegaconf import OmegaConf
 
 from windbench.report import figures as F
@@ -201,6 +202,7 @@ def fig_taylor_green(folder: Path) -> F.Drawn:
     ax2.set_title("dt refined alone, 64 cells", fontsize=9)
     for a in (ax, ax2):
         a.grid(True, which="both", alpha=0.3)
+        a.xaxis.set_minor_formatter(NullFormatter())  # decade labels only: no overlaps
     F._legend_outside(fig, ax.get_legend_handles_labels()[0], "outside lower center", ncol=2)
     caption = (
         "Taylor-Green vortex (2D periodic, L = 2π, U = 1, ν = 0.05, t = 1 s; analytic decay "
