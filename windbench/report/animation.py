@@ -31,11 +31,12 @@ from tqdm.auto import tqdm
 
 from windbench.report import figures as F
 from windbench.report.collect import RunRecord
-from windbench.report.frames import RunFrames, open_frames, wind_direction
+from windbench.report.frames import RunFrames, wind_direction
 
 PLAYBACK_FPS = 10.0  # frames shown per second of video
 DPI = 80
 BLOCK = 16  # H.264 macro block: frame sides are padded to a multiple of it
+GIF_REDUCE = 2  # GIF fallback: frames shrunk by this factor per side
 CRF = 28  # x264 constant rate factor (0 best .. 51 worst): small files, clean flat colours
 WINDS = ("navier_stokes", "particles", "global")  # column order, as in Figs. 4/5
 FRAMES_COMMAND = "output.frames.interval=0.02"  # what a run needs to be animated
@@ -58,26 +59,8 @@ class Column:
 
 def columns(records: Sequence[RunRecord], scene: str) -> list[Column]:
     """The finest run of each backend on ``scene`` that recorded frames, in :data:`WINDS` order."""
-    out = []
-    for wind in WINDS:
-        runs = [
-            r
-            for r in records
-            if r.status == "complete"
-            and r.settings.get("scene") == scene
-            and r.settings.get("wind") == wind
-        ]
-        for rec in sorted(runs, key=_finest):
-            frames = open_frames(rec.path)
-            if frames is not None:
-                out.append(Column(wind, rec, frames))
-                break
-    return out
-
-
-def _finest(rec: RunRecord) -> tuple:
-    s = rec.settings
-    return (-int(s["resolution"]), float(s["dt"]), int(s["seed"]), str(rec.path))
+    found = [(wind, F.pick_with_frames(records, scene, wind)) for wind in WINDS]
+    return [Column(wind, *pair) for wind, pair in found if pair is not None]
 
 
 # ---------------------------------------------------------------------------- drawing
@@ -86,7 +69,7 @@ def _finest(rec: RunRecord) -> tuple:
 class SceneAnimation:
     """One scene's figure, drawn once and updated frame by frame (a fixed layout)."""
 
-    def __init__(self, scene_name: str, cols: list[Column]):
+    def __init__(self, cols: list[Column]):
         self.cols = cols
         with_cloth = cols[0].frames.triangles.size > 0
         with xr.open_dataset(cols[0].record.path) as ds:
@@ -152,6 +135,7 @@ class SceneAnimation:
                 ax=cloth_axes,
                 label="|F| / A (Pa)",
                 shrink=0.8,
+                pad=0.08,  # clear of the 3D axes' z labels
                 extend="max",
             )
         fig.colorbar(
@@ -273,7 +257,10 @@ def _mp4(frames, path: Path, fps: float) -> Path:
 def _gif(frames, path: Path, fps: float) -> Path:
     from PIL import Image
 
-    images = [Image.fromarray(img).convert("P", palette=Image.Palette.ADAPTIVE) for img in frames]
+    images = [  # half size: a GIF stores every frame whole
+        Image.fromarray(img).reduce(GIF_REDUCE).convert("P", palette=Image.Palette.ADAPTIVE)
+        for img in frames
+    ]
     images[0].save(
         path,
         save_all=True,
@@ -306,7 +293,7 @@ def animate(
             f"wind={','.join(WINDS)} {FRAMES_COMMAND}`",
         )
     fmt = fmt or ("mp4" if encoder_available() else "gif")
-    anim = SceneAnimation(scene, cols)
+    anim = SceneAnimation(cols)
     folder.mkdir(parents=True, exist_ok=True)
     path = encode(anim.frames(), len(anim.times), folder / name, PLAYBACK_FPS, fmt, progress)
     return Animated(name, title(scene), _caption(anim, fmt), path.name)

@@ -121,17 +121,28 @@ def pick(records: Sequence[RunRecord], scene: str, wind: str) -> RunRecord | Non
         and r.settings.get("scene") == scene
         and r.settings.get("wind") == wind
     ]
-    if not runs:
-        return None
-    return min(
-        runs,
-        key=lambda r: (
-            -int(r.settings["resolution"]),
-            float(r.settings["dt"]),
-            int(r.settings["seed"]),
-            str(r.path),
-        ),
-    )
+    return min(runs, key=_finest_first) if runs else None
+
+
+def _finest_first(rec: RunRecord) -> tuple:
+    s = rec.settings
+    return (-int(s["resolution"]), float(s["dt"]), int(s["seed"]), str(rec.path))
+
+
+def pick_with_frames(records: Sequence[RunRecord], scene: str, wind: str):
+    """(record, frames) of the finest complete run of (scene, wind) that kept frames, or None."""
+    runs = [
+        r
+        for r in records
+        if r.status == "complete"
+        and r.settings.get("scene") == scene
+        and r.settings.get("wind") == wind
+    ]
+    for rec in sorted(runs, key=_finest_first):
+        frames = open_frames(rec.path)
+        if frames is not None:
+            return rec, frames
+    return None
 
 
 def scene_of(ds: xr.Dataset) -> Scene:
@@ -347,7 +358,7 @@ def _figure(width: float, height: float) -> Figure:
 
 def _run_note(rec: RunRecord) -> str:
     s = rec.settings
-    return f"{s['wind']}, resolution {s['resolution']}, dt = {float(s['dt']):.4g} s"
+    return f"{s['wind']}, resolution {s['resolution']}, dt = {float(s['dt']):.3g} s"
 
 
 # ---------------------------------------------------------------------------- paper figures
@@ -529,10 +540,9 @@ def fig6_shirt(records: Sequence[RunRecord]) -> Drawn | Missing:
     title = TITLES["fig6_shirt"]
     present = []
     for wind in SHIRT_WINDS:
-        rec = pick(records, "shirt", wind)
-        frames = open_frames(rec.path) if rec is not None else None
-        if frames is not None:
-            present.append((wind, rec, frames))
+        found = pick_with_frames(records, "shirt", wind)
+        if found is not None:
+            present.append((wind, *found))
     if not present:
         return Missing(
             "fig6_shirt",
@@ -601,6 +611,7 @@ def fig6_shirt(records: Sequence[RunRecord]) -> Drawn | Missing:
         ax=cloth_axes,
         label="|F| / A (Pa)",
         shrink=0.6,
+        pad=0.08,  # clear of the 3D axes' z labels
         extend="max",
     )
     fig.colorbar(im, ax=slice_axes, label="wind speed (m/s)", shrink=0.8)
@@ -677,7 +688,7 @@ def fig_opposing_sources(records: Sequence[RunRecord]) -> Drawn | Missing:
                 field.T, origin="lower", extent=_extent(ds), vmin=-u, vmax=u, cmap="RdBu_r"
             )
             _draw_bodies_xy(ax, scene, float(ds["z"].values[iz]))
-            ax.set_title(f"{label}\nRMS |u_x| = {np.sqrt(np.mean(field**2)):.2f} m/s", fontsize=9)
+            ax.set_title(f"{label}\nRMS |u_x| = {np.sqrt(np.mean(field**2)):.3g} m/s", fontsize=9)
             ax.set_xlabel("x (m)")
             ax.set_ylabel("y (m)")
             ax.set_aspect("equal")

@@ -33,12 +33,12 @@ import xarray as xr
 
 from windbench.scenes import Scene
 
-FRAME_VARIABLES = ("slice_wind", "triangle_force")  # what every frame-recording run has
+NEEDED = ("slice_wind", "triangle_force")  # what every run that kept frames has
 FRONT_BAND = 2.0  # cells behind the gust front still counted as not yet reached
 
 
 def has_frames(ds: xr.Dataset) -> bool:
-    return all(v in ds for v in FRAME_VARIABLES) and ds.sizes.get("frame", 0) > 0
+    return all(v in ds for v in NEEDED) and ds.sizes.get("frame", 0) > 0
 
 
 def triangle_areas(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
