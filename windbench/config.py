@@ -160,10 +160,25 @@ class ClothConfig:
 
 
 @dataclass
+class FramesConfig:
+    """What the report's animations need (``output.frames``), kept every ``interval`` s.
+
+    A frame holds a horizontal slice of the wind at height ``height``, the aerodynamic force
+    on every cloth triangle and, with a backend that tracks arrival (particles), which cells
+    of the slice the wind has reached; the cloth itself is kept every step
+    (``cloth_position``).
+    """
+
+    interval: float = 0.0  # s of simulated time between frames (whole steps); 0: no frames
+    height: float | None = None  # m, z of the wind slice; null: the lee box's centre
+
+
+@dataclass
 class OutputConfig:
     snapshots: int = setting(
         4, "1", "wind snapshots kept (evenly spaced, the last at the end)", ge=1
     )
+    frames: FramesConfig = field(default_factory=FramesConfig)
     probe_points: int = setting(6, "1", "lee/free-stream probe lattice: points per axis", ge=1)
     filename: str = setting("windbench.nc", "", "dataset file name inside the run folder")
 

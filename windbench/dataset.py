@@ -174,8 +174,39 @@ def run_dataset(setup: RunSetup, rec: Recorder, status: str, failure: str = "") 
         if key not in ("step_seconds", "aero_force", "cloth_position"):
             ds[key] = (("time",), np.asarray(values, dtype=float))
     ds = _probes(ds, setup, rec)
+    ds = _frames(ds, setup, rec)
     ds.attrs.update(_run_attrs(setup, status, failure, n))
     return annotate(ds, rec.units)
+
+
+FRAME_VARIABLES = {  # output.frames: name -> (dims after "frame", long_name, units)
+    "slice_wind": (("x", "y", "component"), "wind in the horizontal slice at z = slice_z", "m s-1"),
+    "triangle_force": (
+        ("triangle", "component"),
+        "aerodynamic force on each cloth triangle (paper section 3)",
+        "N",
+    ),
+    "slice_reached": (("x", "y"), "1 where a gust particle has marked the cell since t = 0", "1"),
+    "reached_box": (
+        ("bound", "component"),
+        "lower and upper cell centre of the box around every cell a gust particle has marked",
+        "m",
+    ),
+}
+
+
+def _frames(ds: xr.Dataset, setup: RunSetup, rec: Recorder) -> xr.Dataset:
+    """The animation frames (``output.frames``) along ``frame`` (coordinate ``frame_time``)."""
+    if not rec.frame_times:
+        return ds
+    ds = ds.assign_coords(
+        frame_time=("frame", np.asarray(rec.frame_times), {"units": "s"}),
+        slice_z=((), setup.frames.height, {"units": "m", "long_name": "slice height"}),
+    )
+    for name, values in rec.frame_data.items():
+        dims, long_name, units = FRAME_VARIABLES[name]
+        ds[name] = (("frame", *dims), np.asarray(values), {"long_name": long_name, "units": units})
+    return ds
 
 
 def _step_seconds(ds: xr.Dataset, rec: Recorder, n: int) -> None:

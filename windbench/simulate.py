@@ -45,6 +45,15 @@ FILENAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\.nc")
 
 
 @dataclass(frozen=True)
+class FramePlan:
+    """The steps that keep an animation frame (``output.frames``) and the wind slice's layer."""
+
+    steps: frozenset[int]  # step numbers n + 1 (a frame at t = (n + 1) dt)
+    layer: int  # z index of the horizontal wind slice
+    height: float  # m, that layer's cell-centre height
+
+
+@dataclass(frozen=True)
 class RunSetup:
     """The checked model of one run: nothing here changes while it runs."""
 
@@ -58,6 +67,7 @@ class RunSetup:
     snapshot_steps: tuple[int, ...]
     probe_points: dict[str, np.ndarray]
     cfl: float  # fastest source speed x dt / h
+    frames: FramePlan
 
 
 def _require(cond: bool, key: str, message: str):
@@ -112,7 +122,48 @@ def prepare(cfg: DictConfig) -> RunSetup:
         snapshot_steps=tuple(int(s) for s in snaps if s >= 1),
         probe_points={k: b.lattice(int(cfg.output.probe_points)) for k, b in scene.probes.items()},
         cfl=cfl,
+        frames=plan_frames(cfg.output.frames, scene, grid, dt, n_steps),
     )
+
+
+def plan_frames(frames, scene: Scene, grid: Grid, dt: float, n_steps: int) -> FramePlan:
+    """Every ``round(interval / dt)``-th step (at least every step) and the last one keep a
+    frame; the slice is the cell layer nearest to ``height`` (default: the lee box's centre,
+    else mid-domain)."""
+    interval = float(frames.interval)
+    _require(
+        np.isfinite(interval) and interval >= 0,
+        "output.frames.interval",
+        f"must be >= 0 seconds (0: no frames), got {interval}",
+    )
+    lo, hi = float(scene.lower[2]), float(scene.upper[2])
+    height = frames.height
+    if height is None:
+        lee = scene.probes.get("lee")
+        height = 0.5 * (lee.lower[2] + lee.upper[2]) if lee is not None else 0.5 * (lo + hi)
+    height = float(height)
+    _require(
+        lo <= height <= hi,
+        "output.frames.height",
+        f"must lie in the domain's z range [{lo:g}, {hi:g}] m, got {height}",
+    )
+    layer = int(np.clip(np.floor((height - lo) / grid.h), 0, grid.shape[2] - 1))
+    steps: set[int] = set()
+    if interval > 0:
+        every = max(1, int(round(interval / dt)))
+        steps = set(range(every, n_steps + 1, every)) | {n_steps}
+    return FramePlan(frozenset(steps), layer, lo + (layer + 0.5) * grid.h)
+
+
+def reached_box(cells: np.ndarray, grid: Grid) -> np.ndarray:
+    """``(2, 3)``: the lowest and highest cell centre, per axis, of the cells that are True
+    (nan where none is)."""
+    box = np.full((2, 3), np.nan)
+    for a in range(3):
+        idx = np.flatnonzero(cells.any(axis=tuple(b for b in range(3) if b != a)))
+        if idx.size:
+            box[:, a] = grid.lower[a] + (idx[[0, -1]] + 0.5) * grid.h
+    return box
 
 
 def check_filename(name: str) -> None:
@@ -254,6 +305,8 @@ class Recorder:
         self.snap_times: list[float] = []
         self.snap_wind: list[np.ndarray] = []
         self.snap_probe: list[np.ndarray] = []
+        self.frame_times: list[float] = []
+        self.frame_data: dict[str, list[np.ndarray]] = {}
 
     def add(self, name: str, value):
         self.rows.setdefault(name, []).append(value)
@@ -266,6 +319,12 @@ class Recorder:
         self.snap_times.append(t)
         self.snap_wind.append(np.array(wind, dtype=np.float64))
         self.snap_probe.append(probe_wind)
+
+    def frame(self, t: float, arrays: dict[str, np.ndarray]):
+        """One animation frame: arrays named in :data:`windbench.dataset.FRAME_VARIABLES`."""
+        self.frame_times.append(t)
+        for name, value in arrays.items():
+            self.frame_data.setdefault(name, []).append(np.array(value))
 
 
 class Simulation:
@@ -341,6 +400,20 @@ class Simulation:
                 u,
                 np.concatenate([probe_wind[k] for k in pts]) if pts else np.zeros((0, 3)),
             )
+        if n + 1 in s.frames.steps:
+            rec.frame((n + 1) * s.dt, self._frame(u, tri_f))
+
+    def _frame(self, u: np.ndarray, tri_f: np.ndarray) -> dict[str, np.ndarray]:
+        """The wind slice, the force on each triangle and, where the backend tracks it
+        (``ever_reached``), which cells of the slice the wind has reached."""
+        k = self.setup.frames.layer
+        out = {"slice_wind": u[:, :, k, :], "triangle_force": tri_f}
+        reached = getattr(self.wind, "ever_reached", None)
+        if reached is not None:
+            cells = reached()
+            out["slice_reached"] = cells[:, :, k].astype(np.int8)
+            out["reached_box"] = reached_box(cells, self.setup.grid)
+        return out
 
     def _check_finite(self, n: int, u: np.ndarray):
         if not np.isfinite(u).all():

@@ -17,6 +17,7 @@ import pandas as pd
 from windbench.aero import AeroParams
 from windbench.config import AeroConfig
 from windbench.dataset import write_atomic
+from windbench.report import animation, validation
 from windbench.report import figures as F
 from windbench.report.collect import (
     AVERAGE_FROM,
@@ -193,6 +194,7 @@ def build_report(
     dims = swept_keys(records)
     ref_note = _reference_note(refs, reference)
     aero, aero_src = _aero_params(records)
+    regenerate = F.regenerate(records, inputs, out, reference)
 
     def place(result) -> FigureRef | Note:
         if isinstance(result, F.Missing):
@@ -200,7 +202,7 @@ def build_report(
             return Note(result.title, result.needs, result.error)
         F.save(result.figure, fig_dir, result.name)
         report.drawn.append(result.name)
-        return FigureRef(result.name, result.title, result.caption)
+        return FigureRef(result.name, result.title, f"{result.caption} {regenerate}")
 
     counts = summary["status"].value_counts().to_dict()
     overview = Section(
@@ -304,7 +306,9 @@ def build_report(
                 "Skipped (not combined)",
             )
         )
-    sections = [overview, paper, measured, plate, runs]
+    moving = animation.section(records_ok, fig_dir, place, regenerate, progress)
+    checks = validation.section(records_ok, inputs, place)
+    sections = [overview, paper, moving, measured, plate, *([checks] if checks else []), runs]
     title = f"windbench report: {name}"
     (out / "report.md").write_text(to_markdown(title, sections), encoding="utf-8")
     (out / "index.html").write_text(to_html(title, sections, fig_dir), encoding="utf-8")
