@@ -25,7 +25,7 @@ def test_frames_are_kept_every_interval_and_agree_with_therun_ok(frame_runs):
     with xr.open_dataset(frame_runs / "wall_particles" / "windbench.nc") as ds:
         np.testing.assert_allclose(ds["frame_time"].values, [0.1, 0.2, 0.3])
         # the last frame is the last step: its slice is the last snapshot's layer
-        z = float(ds["slice_z"].values)
+        z = float(ds["slice_wind"].attrs["slice_z"])
         layer = int(np.abs(ds["z"].values - z).argmin())
         np.testing.assert_array_equal(
             ds["slice_wind"].values[-1], ds["wind"].values[-1][:, :, layer, :]

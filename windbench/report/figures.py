@@ -404,7 +404,7 @@ def fig3_flag(records: Sequence[RunRecord]) -> Drawn | Missing:
 
 def _slice_height(ds: xr.Dataset) -> float:
     """The height of the recorded frames' slice (``slice_z``), else :func:`_lee_height`."""
-    return float(ds["slice_z"].values) if "slice_z" in ds.coords else _lee_height(ds)
+    return float(ds["slice_wind"].attrs["slice_z"]) if "slice_wind" in ds else _lee_height(ds)
 
 
 def _arrival(ds: xr.Dataset, path) -> tuple[RunFrames | None, str]:

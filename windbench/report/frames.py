@@ -184,7 +184,7 @@ def read_frames(ds: xr.Dataset, path: Path) -> RunFrames | None:
         positions=np.asarray(ds["cloth_position"].values[index], dtype=float),
         triangles=np.asarray(ds["cloth_triangles"].values, dtype=np.int64),
         vertex_cloth=np.asarray(ds["vertex_cloth"].values, dtype=np.int64),
-        slice_z=float(ds["slice_z"].values),
+        slice_z=float(ds["slice_wind"].attrs["slice_z"]),
         x=x,
         y=np.asarray(ds["y"].values, dtype=float),
         h=h,
