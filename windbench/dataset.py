@@ -180,7 +180,11 @@ def run_dataset(setup: RunSetup, rec: Recorder, status: str, failure: str = "") 
 
 
 FRAME_VARIABLES = {  # output.frames: name -> (dims after "frame", long_name, units)
-    "slice_wind": (("x", "y", "component"), "wind in the horizontal slice at height slice_z (attribute, m)", "m s-1"),
+    "slice_wind": (
+        ("x", "y", "component"),
+        "wind in the horizontal slice at height slice_z (attribute, m)",
+        "m s-1",
+    ),
     "triangle_force": (
         ("triangle", "component"),
         "aerodynamic force on each cloth triangle (paper section 3)",
