@@ -77,7 +77,7 @@ def test_cli_bad_input_exits_2_with_one_line_and_writes_no_dataset(cli, tmp_path
     proc = cli("scene=flag", "sim.dt=-1", f"hydra.run.dir={tmp_path / 'out'}")
     assert proc.returncode == 2
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-    assert lines == ["windbench: error: sim.dt: must be > 0 seconds, got -1.0"]
+    assert lines == ["windbench: error: sim.dt: must be > 0 s, got -1.0"]
     assert not list(tmp_path.rglob("*.nc"))
 
 

@@ -29,7 +29,7 @@ def statuses(sweep_dir):
 def test_submitit_sweep_isolates_a_diverging_run_and_resume_reruns_only_it(cli, tmp_path):
     sweep = tmp_path / "sweep"
     proc = cli("-m", "hydra/launcher=submitit_local", *SWEEP, f"hydra.sweep.dir={sweep}")
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode == 1, proc.stderr  # a sweep with a failed run exits 1
     assert "windbench sweep: 3 complete, 1 failed, 0 invalid, 0 skipped" in proc.stdout
     assert statuses(sweep) == {"0": "complete", "1": "complete", "2": "complete", "3": "failed"}
     with xr.open_dataset(sweep / "3" / "windbench.nc") as ds:
@@ -45,6 +45,7 @@ def test_submitit_sweep_isolates_a_diverging_run_and_resume_reruns_only_it(cli, 
         "-m", "hydra/launcher=submitit_local", *SWEEP, f"hydra.sweep.dir={sweep}", "resume=true"
     )
     assert "windbench sweep: 0 complete, 1 failed, 0 invalid, 3 skipped" in proc.stdout
+    assert proc.returncode == 1
     assert {n: (sweep / n / "windbench.nc").stat().st_mtime_ns for n in "012"} == mtimes
 
 
@@ -114,13 +115,16 @@ def test_sigkill_during_a_write_leaves_no_corrupt_dataset(tmp_path, delay):
 @pytest.mark.parametrize(
     "overrides, message",
     [
-        (["grid.resolution=4000"], r"grid.resolution: 4000 gives .* cells needing about .* GiB"),
+        (
+            ["grid.resolution=4000"],
+            r"grid.resolution: 4000 gives .* cells: the run would need about .* GiB",
+        ),
         (["sim.dt=5", "sim.duration=10"], r"sim.dt: 5.0 s lets the wind .* cross the whole domain"),
         (
             ["scene=fence", "scene.bodies.0.min=[9,0,0]", "scene.bodies.0.max=[10,4,2]"],
             r"scene.bodies\[0\]: body lies entirely outside the domain",
         ),
-        (["sim.duration=-1"], "sim.duration: must be at least sim.dt"),
+        (["sim.duration=-1"], "sim.duration: must be > 0 s"),
     ],
 )
 def test_validation_refuses_before_work(overrides, message):

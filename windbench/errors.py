@@ -1,4 +1,5 @@
-"""The two ways a run can stop early: bad input (before any work) or a blow-up (during it)."""
+"""How a run stops early (bad input before any work, a blow-up during it, a run folder
+another run holds) and how a dataset can be found unfit to read."""
 
 
 class ConfigError(ValueError):
@@ -21,3 +22,14 @@ class SimulationDiverged(RuntimeError):
         self.step = step
         self.reason = reason
         super().__init__(f"diverged at step {step}: {reason}")
+
+
+class FolderBusy(RuntimeError):
+    """Another live run holds the lock of this run folder (windbench.sweep.FolderLock)."""
+
+
+class DatasetUnreadable(OSError):
+    """A dataset that cannot be trusted: it does not open, or a checksum does not match.
+
+    ``str(err)`` is the reason, e.g. ``checksum: variable 'wind' is damaged (...)``.
+    """

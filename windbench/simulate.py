@@ -12,13 +12,13 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import xarray as xr
 from omegaconf import DictConfig, OmegaConf
 from tqdm.auto import tqdm
 
@@ -26,7 +26,8 @@ from windbench import metrics
 from windbench.aero import AeroParams, aerodynamic_forces
 from windbench.cloth import make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
-from windbench.dataset import annotate, git_commit, package_versions, runtime_info, write_atomic
+from windbench.config import check_values
+from windbench.dataset import git_commit, run_dataset, write_atomic
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import inside
 from windbench.grid import Grid
@@ -36,9 +37,22 @@ from windbench.wind.base import Obstacles
 from windbench.wind.primitives import superpose
 
 log = logging.getLogger("windbench")
-PHASES = ("wind", "aero", "cloth", "total")
-BYTES_PER_CELL = 40 * 8  # budget of the heaviest backend: 40 float64 values per cell
 MEMORY_FRACTION = 0.8  # of physical memory a run may plan to use
+# Memory budget per unit of what a user number scales (bytes; generous, not measured):
+BYTES_PER_CELL = 40 * 8  # wind state of the heaviest backend: 40 float64 values per cell
+BYTES_PER_VERTEX = 1024  # cloth solver: state, edges, hinges, tethers, orderings per vertex
+RECORD_COPIES = 2  # recorded arrays exist twice while the dataset is assembled
+RECORDED_SCALARS = 64  # per-step figures and phase times (a generous count), float64 each
+FILENAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*\.nc")
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """The steps that keep an animation frame (``output.frames``) and the wind slice's layer."""
+
+    steps: frozenset[int]  # step numbers n + 1 (a frame at t = (n + 1) dt)
+    layer: int  # z index of the horizontal wind slice
+    height: float  # m, that layer's cell-centre height
 
 
 @dataclass(frozen=True)
@@ -56,6 +70,7 @@ class RunSetup:
     snapshot_steps: tuple[int, ...]
     probe_points: dict[str, np.ndarray]
     cfl: float  # fastest source speed x dt / h
+    frames: FramePlan
     flow_through_time: float  # s: domain length along the wind / reference speed
     analysis_start: float  # s: start of the steady window the statistics are taken over
     wake: tuple | None  # (points, direction, u0) of the scene's wake probe
@@ -72,18 +87,37 @@ def _require(cond: bool, key: str, message: str):
 
 
 def prepare(cfg: DictConfig) -> RunSetup:
-    """Check the whole config and build the model; raise ConfigError on the first fault."""
+    """Check the whole config and build the model; raise ConfigError on the first fault.
+
+    Order: numbers (finite, in range), step count, file name, then every allocation that
+    scales with a user number is estimated (:func:`memory_plan`) before it is made.
+    """
+    check_values(cfg)
     dt, duration = float(cfg.sim.dt), float(cfg.sim.duration)
-    _require(np.isfinite(dt) and dt > 0, "sim.dt", f"must be > 0 seconds, got {dt}")
     _require(duration >= dt, "sim.duration", f"must be at least sim.dt = {dt} s, got {duration}")
+    n_steps = int(round(duration / dt))
     _require(
-        cfg.output.snapshots >= 1, "output.snapshots", f"must be >= 1, got {cfg.output.snapshots}"
+        n_steps <= cfg.sim.max_steps,
+        "sim.dt",
+        f"{dt} s over sim.duration = {duration} s is {n_steps} steps, more than "
+        f"sim.max_steps = {cfg.sim.max_steps}; raise sim.max_steps to run that many",
     )
-    _require(cfg.output.probe_points >= 1, "output.probe_points", "must be >= 1")
+    check_filename(str(cfg.output.filename))
     backend = backend_class(cfg.wind.name)  # unknown backend: error listing the allowed ones
+    _check_cloth_specs(cfg.scene)  # before the meshes are built
     scene = build_scene(cfg.scene)
     grid = Grid.from_domain(scene.lower, scene.upper, int(cfg.grid.resolution))  # no arrays yet
-    _check_memory(grid, int(cfg.grid.resolution))
+    spinup_steps = int(round(_spinup(cfg.sim.spinup, scene) / dt))
+    _require(
+        spinup_steps + n_steps <= cfg.sim.max_steps,
+        "sim.spinup",
+        f"{spinup_steps} spin-up steps and {n_steps} recorded are more than sim.max_steps = "
+        f"{cfg.sim.max_steps}; raise sim.max_steps to run that many",
+    )
+    flow_through, start = analysis_window(scene, spinup_steps * dt, (spinup_steps + n_steps) * dt)
+    model = ClothModel.from_meshes(scene.cloths)
+    plan = memory_plan(cfg, scene, grid, model, n_steps)
+    _check_memory(plan)
     _check_bodies_resolved(scene, grid)
     for probe in ("lee", "free_stream"):
         _require(
@@ -92,12 +126,9 @@ def prepare(cfg: DictConfig) -> RunSetup:
             "is required when a scene has probes (lee and free_stream go together)",
         )
     backend.check(scene, grid, cfg.wind)
+    _check_memory({**plan, **backend.memory(scene, grid, cfg.wind, dt)})
     cfl = _check_cfl(scene, grid, dt, backend)
-    n_steps = int(round(duration / dt))
-    spinup_steps = int(round(_spinup(cfg.sim.spinup, scene) / dt))
-    flow_through, start = analysis_window(scene, spinup_steps * dt, (spinup_steps + n_steps) * dt)
     snaps = np.unique(np.round(np.linspace(0, n_steps, cfg.output.snapshots + 1)[1:]).astype(int))
-    model = ClothModel.from_meshes(scene.cloths)
     make_cloth_solver(cfg.cloth, model, scene.bodies)  # unknown solver or material: fail now
     return RunSetup(
         cfg=cfg,
@@ -111,6 +142,7 @@ def prepare(cfg: DictConfig) -> RunSetup:
         snapshot_steps=tuple(int(s) for s in snaps if s >= 1),
         probe_points={k: b.lattice(int(cfg.output.probe_points)) for k, b in scene.probes.items()},
         cfl=cfl,
+        frames=plan_frames(cfg.output.frames, scene, grid, dt, n_steps),
         flow_through_time=flow_through,
         analysis_start=start,
         wake=_wake_reference(scene),
@@ -163,20 +195,134 @@ def _spinup(value, scene: Scene) -> float:
     return seconds
 
 
+def _wake_reference(scene: Scene):
+    """(points, direction, u0) of the scene's wake probe: u0 is the undisturbed wind of the
+    sources along the probe's direction at each point (``None`` without a probe)."""
+    if scene.wake is None:
+        return None
+    points = scene.wake.points()
+    u0 = superpose(scene.sources, points.reshape(-1, 3)) @ scene.wake.direction
+    if np.any(u0 <= 0):
+        raise ConfigError("scene.wake", "the sources' wind must blow along its direction there")
+    return points, scene.wake.direction, u0.reshape(points.shape[:-1])
+
+
+def plan_frames(frames, scene: Scene, grid: Grid, dt: float, n_steps: int) -> FramePlan:
+    """Every ``round(interval / dt)``-th step (at least every step) and the last one keep a
+    frame; the slice is the cell layer nearest to ``height`` (default: the lee box's centre,
+    else mid-domain)."""
+    interval = float(frames.interval)
+    _require(
+        np.isfinite(interval) and interval >= 0,
+        "output.frames.interval",
+        f"must be >= 0 seconds (0: no frames), got {interval}",
+    )
+    lo, hi = float(scene.lower[2]), float(scene.upper[2])
+    height = frames.height
+    if height is None:
+        lee = scene.probes.get("lee")
+        height = 0.5 * (lee.lower[2] + lee.upper[2]) if lee is not None else 0.5 * (lo + hi)
+    height = float(height)
+    _require(
+        lo <= height <= hi,
+        "output.frames.height",
+        f"must lie in the domain's z range [{lo:g}, {hi:g}] m, got {height}",
+    )
+    layer = int(np.clip(np.floor((height - lo) / grid.h), 0, grid.shape[2] - 1))
+    steps: set[int] = set()
+    if interval > 0:
+        every = max(1, int(round(interval / dt)))
+        steps = set(range(every, n_steps + 1, every)) | {n_steps}
+    return FramePlan(frozenset(steps), layer, lo + (layer + 0.5) * grid.h)
+
+
+def reached_box(cells: np.ndarray, grid: Grid) -> np.ndarray:
+    """``(2, 3)``: the lowest and highest cell centre, per axis, of the cells that are True
+    (nan where none is)."""
+    box = np.full((2, 3), np.nan)
+    for a in range(3):
+        idx = np.flatnonzero(cells.any(axis=tuple(b for b in range(3) if b != a)))
+        if idx.size:
+            box[:, a] = grid.lower[a] + (idx[[0, -1]] + 0.5) * grid.h
+    return box
+
+
+def check_filename(name: str) -> None:
+    """``output.filename`` must name a file inside the run folder: no folders, no hidden or
+    temporary names (a leading dot is what :func:`windbench.dataset.temporary_name` uses)."""
+    _require(
+        FILENAME.fullmatch(name) is not None,
+        "output.filename",
+        f"must be a plain file name ending in .nc (letters, digits, '.', '_', '-'; no '/' "
+        f"and no leading '.'), written inside the run folder; got {name!r}",
+    )
+
+
 def memory_bytes() -> int:
     """Physical memory of this machine (bytes)."""
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
-def _check_memory(grid: Grid, resolution: int):
-    """The grid must fit in memory at BYTES_PER_CELL; say how much it would need."""
-    need = float(grid.n_cells) * BYTES_PER_CELL
+Plan = dict[str, tuple[float, str]]  # config key -> (bytes, what it holds)
+
+
+def memory_plan(cfg: DictConfig, scene: Scene, grid: Grid, cloth: ClothModel, n_steps: int) -> Plan:
+    """Bytes a run holds at its peak, by the config key whose number each share scales with
+    (a backend adds its own, :meth:`WindField.memory`)."""
+    n_cells, n_vertices = float(grid.n_cells), float(cloth.n_vertices)
+    n_snap = min(int(cfg.output.snapshots), n_steps)
+    n_probes = float(len(scene.probes)) * float(cfg.output.probe_points) ** 3
+    per_step = 8.0 * (3 * n_vertices + 3 * cloth.n_cloths + RECORDED_SCALARS)
+    return {
+        "grid.resolution": (
+            n_cells * BYTES_PER_CELL,
+            f"{cfg.grid.resolution} gives {grid.n_cells} cells",
+        ),
+        "output.snapshots": (
+            n_snap * n_cells * 24.0 * RECORD_COPIES,
+            f"{n_snap} wind snapshots of {grid.n_cells} cells",
+        ),
+        "output.probe_points": (  # lattice, samples of a step, one per snapshot
+            n_probes * 24.0 * (2 + n_snap * RECORD_COPIES),
+            f"{cfg.output.probe_points}^3 probe points in each of {len(scene.probes)} boxes",
+        ),
+        "scene.cloths": (n_vertices * BYTES_PER_VERTEX, f"{cloth.n_vertices} cloth vertices"),
+        "sim.duration": (
+            n_steps * per_step * RECORD_COPIES,
+            f"{n_steps} steps x {per_step / 2**20:.3g} MiB recorded per step",
+        ),
+    }
+
+
+def _check_cloth_specs(scene_cfg) -> None:
+    """Refuse a cloth whose ``resolution`` alone (vertices at least) exceeds the memory
+    allowed, before its mesh is built."""
+    for i, spec in enumerate(scene_cfg.get("cloths") or ()):
+        res = spec.get("resolution") if hasattr(spec, "get") else None
+        if res is None or len(res) != 2:
+            continue  # the mesh builder names what is missing
+        vertices = float(np.prod([float(v) for v in res]))
+        _check_memory(
+            {f"scene.cloths[{i}].resolution": (vertices * BYTES_PER_VERTEX, f"{list(res)}")}
+        )
+
+
+def _check_memory(plan: Plan) -> None:
+    """The planned shares must fit in MEMORY_FRACTION of this machine's memory; the error
+    names the key of the largest share and lists the others."""
+    total = sum(b for b, _ in plan.values())
     limit = MEMORY_FRACTION * memory_bytes()
-    _require(
-        need <= limit,
-        "grid.resolution",
-        f"{resolution} gives {grid.n_cells} cells needing about {need / 2**30:.1f} GiB "
-        f"({BYTES_PER_CELL // 8} float64 per cell); this machine allows {limit / 2**30:.1f} GiB",
+    if total <= limit:
+        return
+    gib = 2.0**30
+    shares = sorted(plan.items(), key=lambda kv: -kv[1][0])
+    key, (_, what) = shares[0]
+    others = ", ".join(f"{k} {b / gib:.3g}" for k, (b, _) in shares[1:] if b >= 0.01 * gib)
+    raise ConfigError(
+        key,
+        f"{what}: the run would need about {total / gib:.3g} GiB"
+        + (f" (other shares in GiB: {others})" if others else "")
+        + f"; this machine allows {limit / gib:.3g} GiB",
     )
 
 
@@ -227,10 +373,13 @@ def _check_bodies_resolved(scene: Scene, grid: Grid):
 
 
 class Recorder:
-    """Collects per-step figures and snapshots; turns them into the run dataset."""
+    """Collects per-step figures and snapshots (:func:`windbench.dataset.run_dataset` turns
+    them into the run dataset); ``units`` holds the long_name and units of the figures the
+    backend and the cloth solver record (their ``stats_units``)."""
 
     def __init__(self, setup: RunSetup):
         self.setup = setup
+        self.units: dict[str, tuple[str, str]] = {}
         self.times: list[float] = []
         self.rows: dict[str, list] = {}
         self.phases: dict[str, list[float]] = {}
@@ -239,6 +388,8 @@ class Recorder:
         self.snap_probe: list[np.ndarray] = []
         self.probe_sum: np.ndarray | None = None  # probe wind summed over the steady window
         self.probe_count = 0
+        self.frame_times: list[float] = []
+        self.frame_data: dict[str, list[np.ndarray]] = {}
 
     def add(self, name: str, value):
         self.rows.setdefault(name, []).append(value)
@@ -246,6 +397,11 @@ class Recorder:
     def add_phase(self, phase: str, seconds: float):
         """A backend's sub-phase time (``stats()`` keys ending in ``_seconds``)."""
         self.phases.setdefault(phase, []).append(seconds)
+
+    def snapshot(self, t: float, wind: np.ndarray, probe_wind: np.ndarray):
+        self.snap_times.append(t)
+        self.snap_wind.append(np.array(wind, dtype=np.float64))
+        self.snap_probe.append(probe_wind)
 
     def accumulate_probes(self, t: float, probe_wind: np.ndarray):
         """Add the probe wind of a step to the steady-window mean (t >= analysis_start)."""
@@ -256,128 +412,11 @@ class Recorder:
         self.probe_sum += probe_wind
         self.probe_count += 1
 
-    def snapshot(self, t: float, wind: np.ndarray, probe_wind: np.ndarray):
-        self.snap_times.append(t)
-        self.snap_wind.append(np.array(wind, dtype=np.float64))
-        self.snap_probe.append(probe_wind)
-
-    def dataset(self, status: str, failure: str = "") -> xr.Dataset:
-        s = self.setup
-        n = len(self.times)
-        x, y, z = s.grid.axes()
-        comp = ["x", "y", "z"]
-        ds = xr.Dataset(
-            coords={
-                "time": (
-                    "time",
-                    np.asarray(self.times, dtype=float),
-                    {"units": "s", "long_name": "simulated time"},
-                ),
-                "component": ("component", comp),
-                "x": ("x", x, {"units": "m"}),
-                "y": ("y", y, {"units": "m"}),
-                "z": ("z", z, {"units": "m"}),
-                "cloth": ("cloth", s.cloth.names),
-                "snapshot_time": (
-                    "snapshot",
-                    np.asarray(self.snap_times, dtype=float),
-                    {"units": "s"},
-                ),
-            }
-        )
-        shape_w = (len(self.snap_wind), *s.grid.shape, 3)
-        ds["wind"] = (
-            ("snapshot", "x", "y", "z", "component"),
-            np.asarray(self.snap_wind).reshape(shape_w),
-        )
-        phases = list(PHASES) + sorted(self.phases)
-        seconds = np.asarray(self.rows.get("step_seconds", []), dtype=float).reshape(n, len(PHASES))
-        extra = [np.asarray(self.phases[p][:n], dtype=float) for p in sorted(self.phases)]
-        ds = ds.assign_coords(phase=("phase", phases))
-        ds["step_seconds"] = (
-            ("time", "phase"),
-            np.column_stack([seconds, *extra]) if extra else seconds,
-        )
-        ds["aero_force"] = (
-            ("time", "cloth", "component"),
-            np.asarray(self.rows.get("aero_force", []), dtype=float).reshape(
-                n, s.cloth.n_cloths, 3
-            ),
-        )
-        ds["cloth_position"] = (
-            ("time", "vertex", "component"),
-            np.asarray(self.rows.get("cloth_position", []), dtype=float).reshape(
-                n, s.cloth.n_vertices, 3
-            ),
-        )
-        ds["cloth_triangles"] = (("triangle", "corner"), s.cloth.triangles)
-        ds["vertex_cloth"] = (("vertex",), s.cloth.vertex_cloth)
-        if "wake_speed_ratio" in self.rows and s.scene.wake is not None:
-            ds = ds.assign_coords(
-                wake_distance=("wake_distance", list(s.scene.wake.distances), {"units": "1"}),
-                wake_height=("wake_height", list(s.scene.wake.heights), {"units": "1"}),
-            )
-            ds["wake_speed_ratio"] = (
-                ("time", "wake_distance", "wake_height"),
-                np.asarray(self.rows["wake_speed_ratio"], dtype=float),
-            )
-        for key, values in self.rows.items():
-            if key not in ("step_seconds", "aero_force", "cloth_position", "wake_speed_ratio"):
-                ds[key] = (("time",), np.asarray(values, dtype=float))
-        if s.probe_points:
-            names = sorted(s.probe_points)
-            pts = np.concatenate([s.probe_points[k] for k in names])
-            box = np.concatenate([[k] * len(s.probe_points[k]) for k in names])
-            ds = ds.assign_coords(probe_box=("probe_point", box))
-            ds["probe_points"] = (("probe_point", "component"), pts)
-            ds["probe_wind"] = (
-                ("snapshot", "probe_point", "component"),
-                np.asarray(self.snap_probe).reshape(len(self.snap_probe), len(pts), 3),
-            )
-            mean = (
-                self.probe_sum / self.probe_count
-                if self.probe_count
-                else np.full((len(pts), 3), np.nan)
-            )
-            ds["probe_wind_mean"] = (("probe_point", "component"), mean)
-        cfg = s.cfg
-        ds.attrs.update(
-            wind=str(cfg.wind.name),
-            scene=s.scene.name,
-            resolution=int(cfg.grid.resolution),
-            dt=s.dt,
-            duration=float(cfg.sim.duration),
-            spinup=s.start_time,
-            flow_through_time=s.flow_through_time,
-            analysis_start=s.analysis_start,
-            seed=int(cfg.seed),
-            experiment=str(cfg.get("experiment") or ""),
-            grid_shape=list(s.grid.shape),
-            grid_spacing=s.grid.h,
-            reference_speed=s.scene.reference_speed,
-            cfl=s.cfl,
-            config=OmegaConf.to_yaml(cfg, resolve=True),
-            status=status,
-            failure=failure,
-            steps_completed=n,
-            steps_planned=s.n_steps,
-            git_commit=git_commit(),
-            **package_versions(),
-            **runtime_info(),
-        )
-        return annotate(ds)
-
-
-def _wake_reference(scene: Scene):
-    """(points, direction, u0) of the scene's wake probe: u0 is the undisturbed wind of the
-    sources along the probe's direction at each point (``None`` without a probe)."""
-    if scene.wake is None:
-        return None
-    points = scene.wake.points()
-    u0 = superpose(scene.sources, points.reshape(-1, 3)) @ scene.wake.direction
-    if np.any(u0 <= 0):
-        raise ConfigError("scene.wake", "the sources' wind must blow along its direction there")
-    return points, scene.wake.direction, u0.reshape(points.shape[:-1])
+    def frame(self, t: float, arrays: dict[str, np.ndarray]):
+        """One animation frame: arrays named in :data:`windbench.dataset.FRAME_VARIABLES`."""
+        self.frame_times.append(t)
+        for name, value in arrays.items():
+            self.frame_data.setdefault(name, []).append(np.array(value))
 
 
 class Simulation:
@@ -389,6 +428,8 @@ class Simulation:
         self.wind = make_wind(setup.cfg.wind, setup.scene, setup.grid)
         self.cloth_solver = make_cloth_solver(setup.cfg.cloth, setup.cloth, setup.scene.bodies)
         self.state: ClothState = setup.cloth.initial_state()
+        for producer in (self.wind, self.cloth_solver):
+            self.recorder.units.update(getattr(producer, "stats_units", {}))
 
     def obstacles(self) -> Obstacles:
         return Obstacles(
@@ -454,8 +495,23 @@ class Simulation:
         pts = sorted(probe_wind)
         probes = np.concatenate([probe_wind[k] for k in pts]) if pts else np.zeros((0, 3))
         rec.accumulate_probes((n + 1) * s.dt, probes)
-        if n + 1 - s.spinup_steps in s.snapshot_steps:
+        recorded = n + 1 - s.spinup_steps  # steps since recording started
+        if recorded in s.snapshot_steps:
             rec.snapshot((n + 1) * s.dt, u, probes)
+        if recorded in s.frames.steps:
+            rec.frame((n + 1) * s.dt, self._frame(u, tri_f))
+
+    def _frame(self, u: np.ndarray, tri_f: np.ndarray) -> dict[str, np.ndarray]:
+        """The wind slice, the force on each triangle and, where the backend tracks it
+        (``ever_reached``), which cells of the slice the wind has reached."""
+        k = self.setup.frames.layer
+        out = {"slice_wind": u[:, :, k, :], "triangle_force": tri_f}
+        reached = getattr(self.wind, "ever_reached", None)
+        if reached is not None:
+            cells = reached()
+            out["slice_reached"] = cells[:, :, k].astype(np.int8)
+            out["reached_box"] = reached_box(cells, self.setup.grid)
+        return out
 
     def _check_finite(self, n: int, u: np.ndarray):
         if not np.isfinite(u).all():
@@ -491,13 +547,14 @@ def run(cfg: DictConfig, out_dir: Path) -> RunResult:
     """
     setup = prepare(cfg)
     path = Path(out_dir) / cfg.output.filename
+    git_commit()  # the code as loaded now, before the loop (cached)
     recorder = Recorder(setup)
     try:
         Simulation(setup, recorder).run(progress=bool(cfg.sim.progress))
     except Exception as err:  # noqa: BLE001 - recorded, then reported by the caller
         reason = str(err) if isinstance(err, SimulationDiverged) else f"{type(err).__name__}: {err}"
         log.error("run failed: %s", reason)
-        write_atomic(recorder.dataset("failed", reason), path)
+        write_atomic(run_dataset(setup, recorder, "failed", reason), path)
         return RunResult(path, "failed", reason)
-    write_atomic(recorder.dataset("complete"), path)
+    write_atomic(run_dataset(setup, recorder, "complete"), path)
     return RunResult(path, "complete")

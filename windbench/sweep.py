@@ -1,16 +1,24 @@
-"""Sweeps that survive faults: per-run status files, resume, and the closing count.
+"""Sweeps that survive faults: per-run status files, folder locks, resume, the closing count.
 
 Every run leaves ``run_status.yaml`` beside its dataset (written atomically) saying
 ``complete``, ``failed``, ``invalid`` (bad input, nothing run) or ``skipped`` (resumed:
-a complete dataset with the same resolved config was already there). At the end of a
-multirun, :class:`SweepSummary` (a Hydra callback, see ``conf/config.yaml``) counts them
-and prints one line, whatever launcher ran the jobs (basic, joblib, submitit).
+a complete dataset with the same resolved config and code was already there). At the end
+of a multirun, :class:`SweepSummary` (a Hydra callback, see ``conf/config.yaml``) counts
+them, prints one line, whatever launcher ran the jobs (basic, joblib, submitit), and sets
+the exit status (:func:`exit_status`).
+
+One writer per run folder: a run (and a whole sweep, on its sweep folder) holds
+:class:`FolderLock`, a lock file created atomically with the writer's PID and host. A
+second writer finding it held by a live process refuses; a lock whose process is gone
+(same host) is taken over with a message, and the dead writer's temporary files with it.
 """
 
 from __future__ import annotations
 
+import logging
 import os
-import tempfile
+import socket
+import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -19,24 +27,34 @@ import yaml
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from windbench.dataset import is_complete, read
+from windbench.dataset import CODE_ATTRS, code_version, current_code, owner_tag, read, verify
+from windbench.dataset import temporary_name as _temporary_name
+from windbench.errors import DatasetUnreadable, FolderBusy
 
+log = logging.getLogger("windbench")
 STATUS_FILE = "run_status.yaml"
+LOCK_FILE = ".windbench.lock"
 STATUSES = ("complete", "failed", "invalid", "skipped")
 # keys that do not change a run's numbers: ignored when deciding whether to resume
-NON_SEMANTIC = ("resume", "sim.progress")
+NON_SEMANTIC = ("resume", "sim.progress", "sim.max_steps")
+exit_code = 0  # of the last multirun in this process (set by SweepSummary)
 
 
 def write_status(out_dir: Path, status: str, **info: Any) -> None:
-    """Atomically write ``run_status.yaml`` in ``out_dir``."""
+    """Atomically write ``run_status.yaml`` in ``out_dir`` (mode from the user's umask)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{STATUS_FILE}.", dir=out_dir)
-    with os.fdopen(fd, "w") as fh:
-        yaml.safe_dump({"status": status, **info}, fh)
-    os.replace(tmp, out_dir / STATUS_FILE)
+    tmp = _temporary_name(out_dir / STATUS_FILE)
+    try:
+        with open(tmp, "x") as fh:
+            yaml.safe_dump({"status": status, **info}, fh)
+        os.replace(tmp, out_dir / STATUS_FILE)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
+# ------------------------------------------------------------------------ resume
 def semantic_config(cfg) -> dict:
     """The resolved config as a plain dict without the keys that do not change results."""
     if isinstance(cfg, str):
@@ -53,20 +71,132 @@ def semantic_config(cfg) -> dict:
     return data
 
 
-def already_done(cfg: DictConfig, path: Path) -> bool:
-    """True if ``path`` holds a complete dataset of the same (semantic) config."""
-    if not is_complete(path):
-        return False
+def resume_decision(cfg: DictConfig, path: Path) -> tuple[bool, str]:
+    """(skip, why) for a run whose dataset would be ``path``: skip only a dataset that is
+    whole (checksums verified), complete, of the same config and, unless
+    ``resume.code=any``, made by the same code (:data:`windbench.dataset.CODE_ATTRS`)."""
+    path = Path(path)
+    if not path.exists():
+        return False, "no dataset yet"
+    try:
+        verify(path)
+    except DatasetUnreadable as err:
+        return False, f"the dataset is unreadable ({err})"
     with read(path) as ds:
-        return semantic_config(ds.attrs.get("config", "")) == semantic_config(cfg)
+        attrs = dict(ds.attrs)
+    if attrs.get("status") != "complete":
+        return False, f"the dataset's status is {attrs.get('status')!r}"
+    if semantic_config(attrs.get("config", "")) != semantic_config(cfg):
+        return False, "the config changed"
+    now = current_code()
+    if cfg.resume.code != "any" and any(str(attrs.get(k)) != now[k] for k in CODE_ATTRS):
+        return False, (
+            f"it was made by {code_version(attrs)}, this is {code_version(now)} "
+            "(resume.code=any keeps it)"
+        )
+    return True, "complete with the same config and code"
 
 
-def remove_stale_temporaries(out_dir: Path) -> None:
-    """Delete temporary files a killed run left behind (never the final dataset)."""
-    for tmp in Path(out_dir).glob(".*.tmp"):
+# ------------------------------------------------------------------------ lock
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's live process
+        return True
+    return True
+
+
+class FolderLock:
+    """``with FolderLock(folder):`` — this process is the folder's only writer.
+
+    The lock file (:data:`LOCK_FILE`) is created with ``O_EXCL`` and holds ``pid host
+    time``. Re-entrant within a process (a single run locks its folder before Hydra starts
+    and again in the task). ``where`` names the folder in the refusal (e.g.
+    ``hydra.run.dir``).
+    """
+
+    def __init__(self, folder: Path, where: str = "run folder"):
+        self.folder = Path(folder)
+        self.path = self.folder / LOCK_FILE
+        self.where = where
+        self.owned = False
+
+    def __enter__(self) -> FolderLock:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        for _ in range(3):  # create, or take over a stale lock and create
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+            except FileExistsError:
+                if self._held_by_us():
+                    return self
+                self._take_over()  # FolderBusy if a live run holds it
+                continue
+            with os.fdopen(fd, "w") as fh:
+                fh.write(f"{os.getpid()} {socket.gethostname()} {time.time():.0f}\n")
+            self.owned = True
+            return self
+        raise FolderBusy(f"{self.where}: could not take the lock {self.path}")
+
+    def __exit__(self, *exc) -> None:
+        if self.owned:
+            self.path.unlink(missing_ok=True)
+            self.owned = False
+
+    def _holder(self) -> tuple[int, str]:
+        try:
+            pid, host, *_ = self.path.read_text().split()
+            return int(pid), host
+        except (OSError, ValueError):
+            return -1, ""  # vanished or half written: try again
+
+    def _held_by_us(self) -> bool:
+        pid, host = self._holder()
+        return pid == os.getpid() and host == socket.gethostname()
+
+    def _take_over(self) -> None:
+        """Remove a stale lock (its run is gone) with that run's temporaries; FolderBusy if
+        a live run holds it."""
+        pid, host = self._holder()
+        if pid < 0:
+            return
+        if host != socket.gethostname():
+            raise FolderBusy(
+                f"{self.where}: {self.folder} is in use by process {pid} on host {host} "
+                f"(lock file {self.path}; delete it if that run is gone)"
+            )
+        if _alive(pid):
+            raise FolderBusy(
+                f"{self.where}: {self.folder} is in use by run {pid} on this host; "
+                "wait for it to finish or choose another folder"
+            )
+        stale = self.path.with_name(f"{LOCK_FILE}.stale.{os.getpid()}")
+        try:
+            os.rename(self.path, stale)  # atomic: one of two racing takers wins
+        except FileNotFoundError:
+            return
+        removed = remove_temporaries(self.folder, owner_tag(host, pid))
+        stale.unlink(missing_ok=True)
+        log.warning(
+            "%s: took over the lock of run %d, which is no longer running (%d temporary "
+            "files of it removed)",
+            self.folder,
+            pid,
+            removed,
+        )
+
+
+def remove_temporaries(folder: Path, owner: str) -> int:
+    """Delete the temporary files of writer ``owner`` (``host.pid``) in ``folder``."""
+    n = 0
+    for tmp in Path(folder).glob(f".*.{owner}.*.tmp"):
         tmp.unlink(missing_ok=True)
+        n += 1
+    return n
 
 
+# ------------------------------------------------------------------------ summary
 def count_statuses(sweep_dir: Path) -> Counter:
     counts: Counter = Counter()
     for status_file in Path(sweep_dir).rglob(STATUS_FILE):
@@ -77,6 +207,14 @@ def count_statuses(sweep_dir: Path) -> Counter:
     return counts
 
 
+def exit_status(counts: Counter) -> int:
+    """0 when every run is complete or skipped; 2 when any was invalid (bad input: fix
+    it first); else 1 (a run failed, or its status file is unreadable)."""
+    if counts.get("invalid", 0):
+        return 2
+    return 0 if set(counts) <= {"complete", "skipped"} else 1
+
+
 def summary_line(counts: Counter, sweep_dir) -> str:
     parts = [f"{counts.get(s, 0)} {s}" for s in STATUSES]
     parts += [f"{n} {s}" for s, n in counts.items() if s not in STATUSES]
@@ -84,8 +222,12 @@ def summary_line(counts: Counter, sweep_dir) -> str:
 
 
 class SweepSummary(Callback):
-    """Prints the one-line count of a sweep's outcomes when the multirun ends."""
+    """Prints the one-line count of a sweep's outcomes when the multirun ends and sets the
+    process's exit status (``windbench.sweep.exit_code``, read by ``windbench.cli``)."""
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        global exit_code
         sweep_dir = Path(config.hydra.sweep.dir)
-        print(summary_line(count_statuses(sweep_dir), sweep_dir), flush=True)
+        counts = count_statuses(sweep_dir)
+        exit_code = exit_status(counts)
+        print(summary_line(counts, sweep_dir), flush=True)

@@ -13,8 +13,8 @@ from omegaconf import OmegaConf
 from windbench.aero import AeroParams
 from windbench.cli import compose_config
 from windbench.report.collect import RunRecord, flatten, swept_keys
-from windbench.report.figures import fit_exponent, hoerner_long_plate, plate_table, tagging_field
 from windbench.report.comparison import pareto_front
+from windbench.report.figures import fit_exponent, hoerner_long_plate, plate_table, tagging_field
 from windbench.report.lee import assign_lee_errors, choose_references, lee_error
 
 

@@ -719,6 +719,12 @@ def cloth_materials(model: ClothModel, params) -> list[dict[str, float]]:
 class XPBDCloth:
     """The XPBD solver (module docstring). Model: topology, masses, compliances; fixed."""
 
+    stats_units = {
+        "kinetic_energy": ("kinetic energy of the cloth", "J"),
+        "max_penetration": ("deepest penetration of a cloth vertex into a body", "m"),
+        "max_stretch": ("largest relative elongation of a warp/weft edge", "1"),
+    }
+
     def __init__(self, model: ClothModel, bodies, params):
         self.model = model
         self.substeps = _count(params, "substeps", 8)

@@ -17,6 +17,7 @@ import pandas as pd
 from windbench.aero import AeroParams
 from windbench.config import AeroConfig
 from windbench.dataset import write_atomic
+from windbench.report import animation, validation
 from windbench.report import comparison as C
 from windbench.report import figures as F
 from windbench.report.collect import (
@@ -181,14 +182,19 @@ def build_report(
     out = Path(out) if out else Path("reports") / name
     summary = _write_data(records, refs, out, name)
     report = Report(out, records, summary, refs)
-    place = _placer(report, out / "figures")
+    regenerate = F.regenerate(records, inputs, out, reference)
+    place = _placer(report, out / "figures", regenerate)
     complete = summary[summary["status"] == "complete"].copy()
+    records_ok = [r for r in records if r.status == "complete"]
+    checks = validation.section(records_ok, inputs, place)
     sections = [
         _overview(report, inputs, reference),
-        _paper_section(records, place),
         _comparison_section(records, complete, refs, place),
+        _paper_section(records, place),
+        animation.section(records_ok, out / "figures", place, regenerate, progress),
         _measured_section(complete, place),
         plate_section(*_aero_params(records), place),
+        *([checks] if checks else []),
         _runs_section(report, swept_keys(records)),
     ]
     title = f"windbench report: {name}"
@@ -226,8 +232,9 @@ def _write_data(records, refs: dict[str, Reference], out: Path, name: str) -> pd
     return summary
 
 
-def _placer(report: Report, fig_dir: Path):
-    """place(result) -> the document block of a drawn (saved) or missing figure."""
+def _placer(report: Report, fig_dir: Path, regenerate: str):
+    """place(result) -> the document block of a drawn (saved) or missing figure, its
+    caption ending with the command that regenerates it."""
 
     def place(result) -> FigureRef | Note:
         if isinstance(result, F.Missing):
@@ -235,7 +242,7 @@ def _placer(report: Report, fig_dir: Path):
             return Note(result.title, result.needs, result.error)
         F.save(result.figure, fig_dir, result.name)
         report.drawn.append(result.name)
-        return FigureRef(result.name, result.title, result.caption)
+        return FigureRef(result.name, result.title, f"{result.caption} {regenerate}")
 
     return place
 

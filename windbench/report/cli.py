@@ -1,7 +1,9 @@
 """``windbench-report DIR... [--out PATH] [--reference DIR] [--export DIR]``.
 
-Exit status 0 when the report was written (skipped runs are listed, not fatal), 2 on bad
-arguments or when no run file is found.
+Exit status 0 when the report was written (skipped runs are listed, not fatal: a damaged
+dataset is listed as ``unreadable: checksum ...`` and never combined), 2 on bad arguments
+or when no run file is found. The code versions that made the runs are listed, with a
+warning when a sweep mixes several.
 """
 
 from __future__ import annotations
@@ -60,8 +62,18 @@ def main(argv: list[str] | None = None) -> int:
     except FileNotFoundError as err:
         print(f"windbench-report: error: {err}", file=sys.stderr)
         return 2
+    from windbench.report.collect import code_versions
+
     n_ok = sum(r.status == "complete" for r in report.records)
     print(f"windbench-report: {n_ok} of {len(report.records)} runs combined -> {report.out}")
+    versions = code_versions(report.records)
+    print(f"  code: {'; '.join(versions) or 'unknown'}")
+    if len(versions) > 1:
+        print(
+            f"windbench-report: warning: the runs were made by {len(versions)} code versions "
+            "(summary.csv column 'code'); rerun with resume=true for one",
+            file=sys.stderr,
+        )
     for rec in report.skipped:
         reason = rec.reason if len(rec.reason) <= 200 else rec.reason[:199] + "…"
         print(f"  skipped {rec.path}: {rec.status}: {reason}")

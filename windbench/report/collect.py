@@ -8,12 +8,16 @@ fit in memory. Each file becomes one :class:`RunRecord` with a status:
 - ``failed``    — the run stopped (``status = failed``); kept in the summary with its ``failure``;
 - ``partial``   — readable but incomplete (fewer steps than planned, unknown status, or a
   variable of DESIGN.md's run dataset missing);
-- ``unreadable``— netCDF cannot open it (truncated, corrupted); its settings are taken from
-  the Hydra ``.hydra/config.yaml`` beside it when there is one;
+- ``unreadable``— netCDF cannot open it (truncated, corrupted) or a checksum does not match
+  (every chunk of every variable is read back first, :func:`windbench.dataset.verify`:
+  the reason then starts with ``checksum``); its settings are taken from the Hydra
+  ``.hydra/config.yaml`` beside it when there is one;
 - ``invalid``   — no dataset, but the run's ``run_status.yaml`` (windbench.sweep) says the
   config was refused before any work; the reason is kept.
 
-Only ``complete`` runs are combined; the others are listed as skipped with the reason.
+Only ``complete`` runs are combined; the others are listed as skipped with the reason. Each
+record keeps the code version that made it (:func:`windbench.dataset.code_version`):
+:func:`code_versions` lists them, and the report warns when a sweep mixes several.
 
 Figures per run (DESIGN.md "Run dataset"):
 
@@ -51,6 +55,9 @@ import pandas as pd
 import xarray as xr
 from omegaconf import OmegaConf
 
+from windbench.config import schema_fields
+from windbench.dataset import CONVENTIONS, VARIABLES, code_version, verify
+from windbench.errors import DatasetUnreadable
 from windbench.metrics import unsettled_reason
 
 RUN_FILE = "windbench.nc"
@@ -68,6 +75,35 @@ SETTINGS = {
 IGNORED = ("scene.", "output.", "hydra.", "sim.progress", "resume", "experiment")
 REQUIRED = ("wind", "step_seconds", "cloth_position", "divergence_rms")
 AVERAGED = ("lee_speed_ratio", "lee_force_ratio", "divergence_rms")
+# long_name and units of what combine() writes besides the run variables' time means (a
+# run variable's own long_name and units come from the run datasets); units None: a label
+FIGURES: dict[str, tuple[str, str | None]] = {
+    "seconds_per_step": ("mean wall time per step (first step excluded)", "s"),
+    "seconds_per_step_median": ("median wall time per step over the steady window", "s"),
+    "wind_seconds_median": ("median wall time of the wind phase per step, steady window", "s"),
+    "seconds_per_simulated_second": ("median wall time per step / dt", "1"),
+    "analysis_start": ("start of the steady window", "s"),
+    "flow_through_time": ("domain length along the wind / reference speed", "s"),
+    "spinup": ("simulated time before recording", "s"),
+    "end_time": ("last recorded time", "s"),
+    "is_reference": ("the run is its scene's lee reference", "1"),
+    "reference_level": ("the run is a level of its scene's reference", "1"),
+    "step_seconds": ("mean wall time per step and phase (first step excluded)", "s"),
+    "grid_cells": ("number of grid cells", "1"),
+    "grid_spacing": ("grid cell edge h", "m"),
+    "steps_completed": ("steps recorded", "1"),
+    "steps_planned": ("steps planned (sim.duration / sim.dt)", "1"),
+    "lee_error": ("RMS wind error in the lee box against the reference / U_ref", "1"),
+    "experiment": ("experiment of the run", None),
+    "path": ("run dataset file", None),
+    "code": ("code version that made the run", None),
+    "phase": VARIABLES["phase"],
+    "wind": ("wind backend", None),
+    "scene": ("scene", None),
+    "resolution": ("grid cells along the longest domain axis", "1"),
+    "dt": ("time step", "s"),
+    "seed": ("random seed", "1"),
+}
 
 
 @dataclass
@@ -87,6 +123,8 @@ class RunRecord:
     reference_speed: float = math.nan
     experiment: str = ""
     wake: pd.DataFrame | None = None  # window-mean u/u0: index distance (H), columns height (H)
+    code: str = ""  # code_version() of the code that made it
+    meta: dict = field(default_factory=dict)  # figure -> (long_name, units) for results.nc
 
     @property
     def label(self) -> str:
@@ -274,20 +312,45 @@ def _probes(ds: xr.Dataset, rec: RunRecord):
         rec.free_stream_speed = float(np.linalg.norm(last[free], axis=1).mean())
 
 
+def _figure_meta(ds: xr.Dataset) -> dict:
+    """(long_name, units) of each figure _figures takes from a per-step run variable."""
+    meta = {}
+    late = "the steady window (t >= analysis_start)"
+    for name, var in ds.data_vars.items():
+        if var.dims != ("time",):
+            continue
+        long_name, units = var.attrs.get("long_name", name), var.attrs.get("units")
+        if name == "divergence_max":
+            meta[name] = (f"{long_name}: maximum over the steady window", units)
+            continue
+        meta[str(name)] = (f"{long_name}: time mean over {late}", units)
+        if name in AVERAGED:
+            meta[f"{name}_final"] = (f"{long_name}: value at the last step", units)
+    return meta
+
+
+def _unreadable(path: Path, reason: str) -> RunRecord:
+    flat = _config_beside(path)
+    return RunRecord(
+        path,
+        "unreadable",
+        clean_reason(reason),
+        settings=_settings_from_config(flat),
+        config=flat,
+    )
+
+
 def read_run(path: Path) -> RunRecord:
     """One run file -> RunRecord (never raises for a bad file: it becomes a status)."""
     path = Path(path)
     try:
+        verify(path)
+    except DatasetUnreadable as err:
+        return _unreadable(path, str(err))
+    try:
         ds = xr.open_dataset(path, engine="netcdf4")
     except Exception as err:  # noqa: BLE001 - any reason to be unreadable is reported
-        flat = _config_beside(path)
-        return RunRecord(
-            path,
-            "unreadable",
-            clean_reason(f"cannot open: {type(err).__name__}: {err}"),
-            settings=_settings_from_config(flat),
-            config=flat,
-        )
+        return _unreadable(path, f"cannot open: {type(err).__name__}: {err}")
     with ds:
         attrs = dict(ds.attrs)
         try:
@@ -306,6 +369,8 @@ def read_run(path: Path) -> RunRecord:
             config=flat,
             experiment=str(attrs.get("experiment", "") or ""),
             reference_speed=float(attrs.get("reference_speed", math.nan)),
+            code=code_version(attrs),
+            meta=_figure_meta(ds),
         )
         status = attrs.get("status")
         missing = [v for v in REQUIRED if v not in ds.variables]
@@ -455,7 +520,7 @@ def summary_frame(records: Sequence[RunRecord]) -> pd.DataFrame:
         row.update(rec.figures)
         for ph, sec in rec.phases.items():
             row[f"step_seconds_{ph}"] = sec
-        row.update(status=rec.status, failure=rec.reason, experiment=rec.experiment)
+        row.update(status=rec.status, failure=rec.reason, experiment=rec.experiment, code=rec.code)
         row["path"] = display_path(rec.path)
         rows.append(row)
     df = pd.DataFrame(rows)
@@ -500,25 +565,33 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     for name in ds.data_vars:
         if ds[name].dtype == object:
             ds[name] = ds[name].fillna("").astype(str)
-    units = {
-        "lee_speed_ratio": "1",
-        "lee_force_ratio": "1",
-        "divergence_rms": "1",
-        "divergence_max": "1",
-        "lee_error": "1",
-        "seconds_per_step": "s",
-        "seconds_per_step_median": "s",
-        "wind_seconds_median": "s",
-        "grid_spacing": "m",
-    }
-    for name, unit in units.items():
-        if name in ds:
-            ds[name].attrs["units"] = unit
+    _annotate_results(ds, good)
     ds.attrs.update(
+        Conventions=CONVENTIONS,
         runs=len(good),
         averaging=(
             "means over each run's steady window (t >= analysis_start: two flow-through "
             "times); step times exclude the first step"
         ),
+        code_versions="; ".join(code_versions(good)),
     )
     return ds
+
+
+def _annotate_results(ds: xr.Dataset, records: Sequence[RunRecord]) -> None:
+    """long_name and units on every variable and coordinate of the combined dataset: the
+    run variables' own (:func:`_figure_meta`), :data:`FIGURES`, the schema's settings."""
+    table = {key: (f.metadata["doc"], f.metadata["units"] or None) for key, f in schema_fields()}
+    for rec in records:
+        table.update({k: v for k, v in rec.meta.items() if k not in table})
+    table.update(FIGURES)
+    for name in ds.variables:
+        long_name, units = table.get(str(name), (f"config key {name}", None))
+        ds[name].attrs["long_name"] = long_name
+        if units is not None and ds[name].dtype.kind in "fiub":
+            ds[name].attrs["units"] = units
+
+
+def code_versions(records: Sequence[RunRecord]) -> list[str]:
+    """The code versions that made the readable runs among ``records``, sorted."""
+    return sorted({r.code for r in records if r.code})

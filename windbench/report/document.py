@@ -1,8 +1,11 @@
 """The report as a list of sections, written as ``report.md`` and a self-contained ``index.html``.
 
 One content model, two renderings: a section holds text (with `code` spans), tables
-(pandas DataFrames), figures (PNG/SVG beside the report) and notes on figures that could not
-be drawn. The HTML embeds every PNG as base64 and has its style inline: it opens offline.
+(pandas DataFrames), figures (PNG/SVG beside the report), animations (MP4 or GIF beside
+the report) and notes on figures that could not be drawn. The HTML embeds every PNG as
+base64 and has its style inline; it plays the animations from ``figures/`` (``<video>``
+with controls for MP4), so it opens offline with its folder. ``report.md`` links them.
+Numbers in tables are shown to three significant digits.
 """
 
 from __future__ import annotations
@@ -33,6 +36,14 @@ class FigureRef:
     name: str  # file stem under figures/
     title: str
     caption: str
+
+
+@dataclass
+class VideoRef:
+    name: str  # file stem under figures/
+    title: str
+    caption: str
+    file: str  # file name under figures/: .mp4 (H.264) or .gif
 
 
 @dataclass
@@ -96,6 +107,16 @@ def to_markdown(title: str, sections: list[Section]) -> str:
                     f"{b.caption} ([SVG](figures/{b.name}.svg))",
                     "",
                 ]
+            elif isinstance(b, VideoRef):
+                kind = Path(b.file).suffix.lstrip(".").upper()
+                out += [
+                    f"### {b.title}",
+                    "",
+                    f"[▶ {b.title} ({kind})](figures/{b.file})",
+                    "",
+                    b.caption,
+                    "",
+                ]
             elif isinstance(b, Note):
                 out += [f"### {b.title}", "", f"*{b.message}*", ""]
     return "\n".join(out).rstrip() + "\n"
@@ -112,12 +133,29 @@ STYLE = """
 body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; padding: 0 1em;
        color: #222; line-height: 1.45; }
 h1 { border-bottom: 2px solid #ccc; } h2 { margin-top: 2em; border-bottom: 1px solid #ddd; }
-table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0 1em; }
+table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0 1em;
+        display: block; max-width: 100%; overflow-x: auto; }
 td, th { border: 1px solid #ccc; padding: 2px 6px; text-align: right; }
-th { background: #f2f2f2; } figure { margin: 1em 0; } img { max-width: 100%; }
+th { background: #f2f2f2; } figure { margin: 1em 0; } img, video { max-width: 100%; }
 figcaption { font-size: 0.9em; color: #444; } code { background: #f4f4f4; padding: 0 3px; }
 .note { color: #8a5a00; }
 """
+
+
+def _video_html(v: VideoRef) -> str:
+    src = f"figures/{html.escape(v.file)}"
+    if v.file.endswith(".gif"):
+        media = f'<img alt="{html.escape(v.title)}" src="{src}">'
+    else:
+        media = (
+            f'<video controls loop muted playsinline preload="metadata" src="{src}">'
+            f'<a href="{src}">{html.escape(v.file)}</a></video>'
+        )
+    return (
+        f"<figure><h3>{_inline(v.title)}</h3>{media}"
+        f'<figcaption>{_inline(v.caption)} (<a href="{src}">{html.escape(v.file)}</a>)'
+        "</figcaption></figure>"
+    )
 
 
 def to_html(title: str, sections: list[Section], figures_dir: Path) -> str:
@@ -147,6 +185,8 @@ def to_html(title: str, sections: list[Section], figures_dir: Path) -> str:
                     f'<img alt="{html.escape(b.title)}" src="data:image/png;base64,{data}">'
                     f"<figcaption>{_inline(b.caption)}</figcaption></figure>"
                 )
+            elif isinstance(b, VideoRef):
+                out.append(_video_html(b))
             elif isinstance(b, Note):
                 out.append(f"<h3>{_inline(b.title)}</h3><p class='note'>{_inline(b.message)}</p>")
     out.append("</body></html>")

@@ -25,12 +25,23 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
+from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: F401 - registers "3d"
 from omegaconf import OmegaConf
 
 from windbench.aero import AeroParams, plate_coefficients
-from windbench.report.collect import RunRecord
+from windbench.report.collect import AVERAGE_FROM, RunRecord
+from windbench.report.frames import (
+    FRONT_BAND,
+    RunFrames,
+    front_passes,
+    gust_front,
+    open_frames,
+    read_frames,
+    side_pressure,
+    wind_direction,
+)
 from windbench.scenes import Scene, build_scene
 from windbench.wind.primitives import superpose
 
@@ -61,7 +72,7 @@ class Missing:
 TITLES = {
     "fig3_flag": "Fig. 3 — flag in the wind",
     "fig45_two_flags_wall": "Figs. 4 and 5 — two flags and a wall",
-    "fig6_shirt": "Fig. 6 — shirt with lee (particles) and without (global)",
+    "fig6_shirt": "Fig. 6 — shirt with lee (particles) and without (global), front and back",
     "opposing_sources": "§4.2.2 — opposing sources: per-source particles vs. tagging with w = Σ wᵢ",
     "lee_in_time": "Lee speed ratio in time",
 }
@@ -110,17 +121,28 @@ def pick(records: Sequence[RunRecord], scene: str, wind: str) -> RunRecord | Non
         and r.settings.get("scene") == scene
         and r.settings.get("wind") == wind
     ]
-    if not runs:
-        return None
-    return min(
-        runs,
-        key=lambda r: (
-            -int(r.settings["resolution"]),
-            float(r.settings["dt"]),
-            int(r.settings["seed"]),
-            str(r.path),
-        ),
-    )
+    return min(runs, key=_finest_first) if runs else None
+
+
+def _finest_first(rec: RunRecord) -> tuple:
+    s = rec.settings
+    return (-int(s["resolution"]), float(s["dt"]), int(s["seed"]), str(rec.path))
+
+
+def pick_with_frames(records: Sequence[RunRecord], scene: str, wind: str):
+    """(record, frames) of the finest complete run of (scene, wind) that kept frames, or None."""
+    runs = [
+        r
+        for r in records
+        if r.status == "complete"
+        and r.settings.get("scene") == scene
+        and r.settings.get("wind") == wind
+    ]
+    for rec in sorted(runs, key=_finest_first):
+        frames = open_frames(rec.path)
+        if frames is not None:
+            return rec, frames
+    return None
 
 
 def scene_of(ds: xr.Dataset) -> Scene:
@@ -133,12 +155,29 @@ def _cloth_polys(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return positions[triangles]
 
 
-def _draw_bodies_3d(ax, scene: Scene):
+def _clip_segment(a, b, lower, upper):
+    """The part of segment ab inside the box [lower, upper] (Liang-Barsky), or None."""
+    t0, t1, d = 0.0, 1.0, b - a
+    for k in range(3):
+        if d[k] == 0:
+            if not lower[k] <= a[k] <= upper[k]:
+                return None
+            continue
+        lo, hi = sorted(((lower[k] - a[k]) / d[k], (upper[k] - a[k]) / d[k]))
+        t0, t1 = max(t0, lo), min(t1, hi)
+    return (a + t0 * d, a + t1 * d) if t0 <= t1 else None
+
+
+def _draw_bodies_3d(ax, scene: Scene, lower=None, upper=None):
+    """Boxes as faces, capsules and cylinders as thick lines, cut to the view box if given."""
+    lower = scene.lower if lower is None else np.asarray(lower)
+    upper = scene.upper if upper is None else np.asarray(upper)
     for body in scene.bodies:
         p = np.asarray(body.params)
         if body.kind == "box":
-            lo, hi = p[0:3], p[3:6]
-            xs, ys, zs = zip(lo, hi, strict=True)
+            lo, hi = np.maximum(p[0:3], lower), np.minimum(p[3:6], upper)
+            if np.any(lo >= hi):
+                continue
             faces = []
             for axis in range(3):
                 for side in (lo[axis], hi[axis]):
@@ -155,8 +194,9 @@ def _draw_bodies_3d(ax, scene: Scene):
                 Poly3DCollection(faces, facecolor="0.6", edgecolor="0.3", alpha=0.35, lw=0.5)
             )
         elif body.kind in ("cylinder", "capsule"):
-            a, b = p[0:3], p[3:6]
-            ax.plot(*zip(a, b, strict=True), color="0.45", lw=2.0 + 50.0 * p[6], alpha=0.8)
+            seg = _clip_segment(p[0:3], p[3:6], lower, upper)
+            if seg is not None:
+                ax.plot(*zip(*seg, strict=True), color="0.45", lw=2.0 + 50.0 * p[6], alpha=0.8)
 
 
 def _draw_cloth_3d(ax, positions, triangles, color="tab:red"):
@@ -167,15 +207,16 @@ def _draw_cloth_3d(ax, positions, triangles, color="tab:red"):
             edgecolor="k",
             linewidths=0.1,
             alpha=0.85,
+            rasterized=True,  # SVG: the mesh as one bitmap, not a path per triangle
         )
     )
 
 
-def _frame_3d(ax, lower, upper):
+def _frame_3d(ax, lower, upper, zoom: float = 1.0):
     ax.set_xlim(lower[0], upper[0])
     ax.set_ylim(lower[1], upper[1])
     ax.set_zlim(lower[2], upper[2])
-    ax.set_box_aspect(tuple(np.asarray(upper) - np.asarray(lower)))
+    ax.set_box_aspect(tuple(np.asarray(upper) - np.asarray(lower)), zoom=zoom)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
@@ -231,9 +272,84 @@ def _draw_bodies_xy(ax, scene: Scene, z: float):
             ax.add_patch(
                 Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fc="0.5", ec="k", lw=0.6)
             )
-        else:
+        else:  # capsule or cylinder: its axis where it crosses the height z
             p = np.asarray(body.params)
-            ax.add_patch(Circle((p[0], p[1]), max(p[6], 0.04), fc="0.3", ec="k", lw=0.6))
+            a, b = p[0:3], p[3:6]
+            f = np.clip((z - a[2]) / (b[2] - a[2]), 0.0, 1.0) if b[2] != a[2] else 0.0
+            c = a + f * (b - a)
+            ax.add_patch(Circle((c[0], c[1]), max(p[6], 0.04), fc="0.3", ec="k", lw=0.6))
+
+
+def _view_box(scene: Scene, positions: Sequence[np.ndarray], margin: float = 0.4):
+    """A 3D view box around the cloth (every frame given) and the bodies the wind grid
+    resolves (walls, a torso), inside the domain; thin bodies (poles, limbs) are cut to it."""
+    solid = [b for b in scene.bodies if b.kind != "plane" and b.resolve]
+    lows = [np.asarray(b.bounds()[0]) for b in solid]
+    highs = [np.asarray(b.bounds()[1]) for b in solid]
+    for pos in positions:
+        if pos.size:
+            lows.append(pos.reshape(-1, 3).min(axis=0) - margin)
+            highs.append(pos.reshape(-1, 3).max(axis=0) + margin)
+    if not lows:
+        return np.asarray(scene.lower, float), np.asarray(scene.upper, float)
+    lo = np.maximum(np.min(lows, axis=0), scene.lower)
+    hi = np.minimum(np.max(highs, axis=0), scene.upper)
+    return lo, hi
+
+
+PRESSURE_CMAP = "plasma"
+SPEED_CMAP = "viridis"
+NOT_ARRIVED_RGBA = (0.93, 0.93, 0.93, 0.95)  # particle tracing: no gust particle yet
+NOT_ARRIVED_LABEL = "no gust particle has arrived yet (not lee)"
+ARRIVAL = (
+    "Particle tracing has wind only where its gust particles have arrived: pale grey cells "
+    f"lie beyond its gust front or within {FRONT_BAND:g} cells behind it (the front is "
+    "ragged) and have not been reached yet, which is not lee; unreached cells farther behind "
+    "the front are its lee."
+)
+
+
+def _shared_max(arrays, q: float = 99.0) -> float:
+    """One colour-scale top for several panels: the q-th percentile of all their values."""
+    values = np.concatenate([np.ravel(a) for a in arrays if np.size(a)] or [np.zeros(1)])
+    values = values[np.isfinite(values)]
+    top = float(np.percentile(values, q)) if values.size else 0.0
+    return top if top > 0 else 1.0
+
+
+def _pressure_cloth_3d(ax, positions, triangles, pressure, norm):
+    """The cloth with each triangle coloured by its |F| / A on the shared scale ``norm``."""
+    import matplotlib
+
+    poly = Poly3DCollection(
+        _cloth_polys(positions, triangles),
+        facecolors=matplotlib.colormaps[PRESSURE_CMAP](norm(pressure)),
+        edgecolor="none",
+        rasterized=True,  # SVG: the mesh as one bitmap, not a path per triangle
+    )
+    ax.add_collection3d(poly)
+    return poly
+
+
+def _not_arrived(frames: RunFrames, k: int, direction) -> np.ndarray:
+    """(ny, nx, 4) RGBA overlay of the slice cells no gust particle has reached by frame k."""
+    rgba = np.zeros((*frames.speed.shape[1:][::-1], 4))
+    _, later = frames.unreached(k, direction)
+    rgba[later.T] = NOT_ARRIVED_RGBA
+    return rgba
+
+
+def regenerate(records: Sequence[RunRecord], inputs: Sequence, out, reference=None) -> str:
+    """The one-line command that remakes a report's figures (ends every caption): the runs'
+    experiment, when they share one, then ``windbench-report`` on the same inputs."""
+    from windbench.report.collect import display_path
+
+    experiments = {r.experiment for r in records if r.experiment}
+    runs = f"windbench -m experiment={experiments.pop()} && " if len(experiments) == 1 else ""
+    args = " ".join(display_path(Path(i)) for i in inputs)
+    if reference:
+        args += f" --reference {display_path(Path(reference))}"
+    return f"Regenerate: `{runs}windbench-report {args} --out {display_path(Path(out))}`."
 
 
 def _figure(width: float, height: float) -> Figure:
@@ -242,7 +358,7 @@ def _figure(width: float, height: float) -> Figure:
 
 def _run_note(rec: RunRecord) -> str:
     s = rec.settings
-    return f"{s['wind']}, resolution {s['resolution']}, dt = {float(s['dt']):.4g} s"
+    return f"{s['wind']}, resolution {s['resolution']}, dt = {float(s['dt']):.3g} s"
 
 
 # ---------------------------------------------------------------------------- paper figures
@@ -277,7 +393,7 @@ def fig3_flag(records: Sequence[RunRecord]) -> Drawn | Missing:
         fig = _figure(3.2 * len(idx), 3.4)
         for n, i in enumerate(idx):
             ax = fig.add_subplot(1, len(idx), n + 1, projection="3d")
-            _draw_bodies_3d(ax, scene)
+            _draw_bodies_3d(ax, scene, lo, hi)
             _draw_cloth_3d(ax, ds["cloth_position"].isel(time=int(i)).values, tris)
             _frame_3d(ax, lo, hi)
             ax.set_title(f"t = {times[i]:.2f} s", fontsize=9)
@@ -286,14 +402,42 @@ def fig3_flag(records: Sequence[RunRecord]) -> Drawn | Missing:
     return Drawn("fig3_flag", title, caption, fig)
 
 
-def _lee_panels(records, scene_name, winds, name, title, rows_3d_times=("last",)):
+def _slice_height(ds: xr.Dataset) -> float:
+    """The height of the recorded frames' slice (``slice_z``), else :func:`_lee_height`."""
+    return float(ds["slice_wind"].attrs["slice_z"]) if "slice_wind" in ds else _lee_height(ds)
+
+
+def _arrival(ds: xr.Dataset, path) -> tuple[RunFrames | None, str]:
+    """The run's frames and a sentence on where its particles have arrived at the end."""
+    frames = read_frames(ds, path)
+    if frames is None or frames.reached is None:
+        if ds.attrs.get("wind") == "particles":
+            return frames, (
+                "Where its particles had not arrived is not recorded (a run with "
+                "`output.frames.interval` > 0 keeps it), so its zero-wind cells may be lee or "
+                "wind not yet arrived."
+            )
+        return frames, ""
+    direction = wind_direction(scene_of(ds))
+    t = float(frames.times[-1])
+    if direction is None:
+        return frames, f"Pale grey: cells no gust particle had reached by t = {t:.2f} s."
+    front = gust_front(frames.reach[-1], direction)
+    where = ", ".join(
+        f"{a} = {v:.3g} m" for a, v in zip("xyz", direction * front, strict=True) if abs(v) > 0
+    )
+    return frames, f"At t = {t:.2f} s the particles' gust front stands at {where}. {ARRIVAL}"
+
+
+def _lee_panels(records, scene_name, winds):
     present = [(w, pick(records, scene_name, w)) for w in winds]
     present = [(w, r) for w, r in present if r is not None]
     if not present:
-        return None, [], []
+        return None, [], [], []
     datasets = [xr.open_dataset(r.path) for _, r in present]
+    notes = []
     try:
-        z = _lee_height(datasets[0])
+        z = _slice_height(datasets[0])
         speeds = [_slice(ds, z) for ds in datasets]
         vmax = max(float(s.max()) for s in speeds) or 1.0
         n = len(present)
@@ -313,6 +457,16 @@ def _lee_panels(records, scene_name, winds, name, title, rows_3d_times=("last",)
             im = ax2.imshow(
                 speed.T, origin="lower", extent=_extent(ds), vmin=0, vmax=vmax, cmap="viridis"
             )
+            frames, note = _arrival(ds, rec.path)
+            if frames is not None and frames.reached is not None:
+                ax2.imshow(
+                    _not_arrived(frames, -1, wind_direction(scene)),
+                    origin="lower",
+                    extent=_extent(ds),
+                    interpolation="nearest",
+                )
+            if note:
+                notes.append(f"{wind}: {note}")
             _draw_bodies_xy(ax2, scene, z)
             if tris.size:
                 pos = ds["cloth_position"].isel(time=-1).values
@@ -322,25 +476,25 @@ def _lee_panels(records, scene_name, winds, name, title, rows_3d_times=("last",)
             ax2.set_ylabel("y (m)")
             lsr = rec.figures.get("lee_speed_ratio", math.nan)
             lfr = rec.figures.get("lee_force_ratio", math.nan)
-            label = f"|u| at z = {z:.2f} m; lee speed ratio " + (
-                f"{lsr:.2f}" if np.isfinite(lsr) else "–"
+            label = f"|u| at z = {z:.3g} m; lee speed ratio " + (
+                f"{lsr:.3g}" if np.isfinite(lsr) else "–"
             )
             if np.isfinite(lfr):
-                label += f", force ratio {lfr:.2f}"
+                label += f", force ratio {lfr:.3g}"
             ax2.set_title(label, fontsize=8)
             axes_slice.append(ax2)
         fig.colorbar(im, ax=axes_slice, label="wind speed (m/s)", shrink=0.8)
     finally:
         for ds in datasets:
             ds.close()
-    return fig, present, [w for w in winds if w not in dict(present)]
+    return fig, present, [w for w in winds if w not in dict(present)], notes
 
 
 def fig45_two_flags_wall(records: Sequence[RunRecord]) -> Drawn | Missing:
     """Figs. 4/5: two flags and a wall; Navier-Stokes beside particle tracing (and global)."""
     title = TITLES["fig45_two_flags_wall"]
     winds = ("navier_stokes", "particles", "global")
-    fig, present, absent = _lee_panels(records, "two_flags_wall", winds, "fig45", title)
+    fig, present, absent, notes = _lee_panels(records, "two_flags_wall", winds)
     if fig is None:
         return Missing(
             "fig45_two_flags_wall",
@@ -350,51 +504,146 @@ def fig45_two_flags_wall(records: Sequence[RunRecord]) -> Drawn | Missing:
         )
     caption = (
         "Final frame of each backend (top) and the wind speed in a horizontal slice through "
-        "the lee box (bottom; grey: the wall, red dots: cloth vertices). The flag behind the "
-        "wall (y > 2 m) is in the lee. Runs: " + "; ".join(_run_note(r) for _, r in present) + "."
+        "the lee box (bottom; dark grey: the wall, red dots: cloth vertices). The wall stands "
+        "upwind of the second flag (y > 2 m); the global field ignores it by design (no "
+        "lee); each slice's title gives the measured lee speed ratio and the force on the "
+        "sheltered flag over that on the exposed one. "
+        + "".join(f"{n} " for n in notes)
+        + "Runs: "
+        + "; ".join(_run_note(r) for _, r in present)
+        + "."
     )
     if absent:
         caption += " Not in the inputs: " + ", ".join(f"`wind={w}`" for w in absent) + "."
     return Drawn("fig45_two_flags_wall", title, caption, fig)
 
 
+SHIRT_WINDS = ("particles", "global", "navier_stokes")  # Fig. 6: lee, no lee, reference
+SIDE_VIEWS = (("front (upwind side)", 180.0), ("back (lee side)", 0.0))  # camera azimuths
+
+
+def shirt_pressure(frames: RunFrames, direction: np.ndarray) -> tuple[float, float]:
+    """(front, back) mean pressure of the cloth, time mean over the frames of the second
+    half of the run (t >= AVERAGE_FROM t_end), each frame's ``sum |F| / sum A``."""
+    late = frames.times >= AVERAGE_FROM * frames.times[-1]
+    sides = [
+        side_pressure(frames.force[k], frames.positions[k], frames.triangles, direction)
+        for k in np.flatnonzero(late)
+    ]
+    front, back = np.asarray(sides).mean(axis=0)
+    return float(front), float(back)
+
+
 def fig6_shirt(records: Sequence[RunRecord]) -> Drawn | Missing:
-    """Fig. 6: the shirt with lee (particles) beside the shirt without (global)."""
+    """Fig. 6: the shirt's front and back coloured by |F| / A, with lee (particles), without
+    (global) and the Navier-Stokes reference, over a horizontal wind slice through the chest."""
     title = TITLES["fig6_shirt"]
-    present = [(w, pick(records, "shirt", w)) for w in ("particles", "global")]
-    present = [(w, r) for w, r in present if r is not None]
+    present = []
+    for wind in SHIRT_WINDS:
+        found = pick_with_frames(records, "shirt", wind)
+        if found is not None:
+            present.append((wind, *found))
     if not present:
         return Missing(
             "fig6_shirt",
             title,
-            "`shirt` runs with `wind=particles` and `wind=global`: "
-            "`windbench -m scene=shirt wind=particles,global`",
+            "`shirt` runs that record frames (per-triangle forces): "
+            f"`windbench -m scene=shirt wind={','.join(SHIRT_WINDS)} output.frames.interval=0.02`",
         )
+    with xr.open_dataset(present[0][1].path) as ds:
+        scene = scene_of(ds)
+    direction = wind_direction(scene)
+    if direction is None:
+        direction = np.array([1.0, 0.0, 0.0])
+    norm = Normalize(0.0, _shared_max([f.pressure[-1] for _, _, f in present]))
+    u_max = _shared_max([f.speed[-1] for _, _, f in present], 100.0)
+    lo, hi = _view_box(scene, [f.positions[-1] for _, _, f in present], margin=0.05)
+    lo[2] = min(f.positions[-1][:, 2].min() for _, _, f in present) - 0.05
     n = len(present)
-    fig = _figure(3.6 * n, 7.0)
-    for c, (wind, rec) in enumerate(present):
-        with xr.open_dataset(rec.path) as ds:
-            scene = scene_of(ds)
-            tris = ds["cloth_triangles"].values
-            lo, hi = _cloth_bounds(ds, scene)
-            for row, i in enumerate((0, -1)):
-                ax = fig.add_subplot(2, n, row * n + c + 1, projection="3d")
-                _draw_bodies_3d(ax, scene)
-                _draw_cloth_3d(ax, ds["cloth_position"].isel(time=i).values, tris, "tab:blue")
-                _frame_3d(ax, lo, hi)
-                ax.view_init(elev=10, azim=-150)
-                t = float(ds["time"].values[i])
-                ax.set_title(
-                    f"{wind} ({'lee' if wind == 'particles' else 'no lee'}), t = {t:.2f} s",
-                    fontsize=9,
-                )
-    caption = "First (top) and last (bottom) frame. Runs: " + "; ".join(
-        _run_note(r) for _, r in present
+    fig = _figure(3.3 * n + 1.0, 9.6)
+    grid = fig.add_gridspec(3, n, height_ratios=[1.0, 1.0, 0.9])
+    cloth_axes, slice_axes, sides = [], [], []
+    for c, (wind, _rec, fr) in enumerate(present):
+        for row, (label, azim) in enumerate(SIDE_VIEWS):
+            ax = fig.add_subplot(grid[row, c], projection="3d")
+            ax.set_proj_type("ortho")
+            _pressure_cloth_3d(ax, fr.positions[-1], fr.triangles, fr.pressure[-1], norm)
+            _frame_3d(ax, lo, hi)
+            ax.view_init(elev=8, azim=azim)
+            ax.set_xticks([])  # along the line of sight
+            ax.set_xlabel("")
+            ax.set_title(f"{wind}: {label}", fontsize=9)
+            cloth_axes.append(ax)
+        ax = fig.add_subplot(grid[2, c])
+        im = ax.imshow(
+            fr.speed[-1].T,
+            origin="lower",
+            extent=fr.extent,
+            vmin=0,
+            vmax=u_max,
+            cmap=SPEED_CMAP,
+            interpolation="nearest",
+        )
+        ax.imshow(_not_arrived(fr, -1, direction), origin="lower", extent=fr.extent)
+        _draw_bodies_xy(ax, scene, fr.slice_z)
+        ring = np.abs(fr.positions[-1][:, 2] - fr.slice_z) < 0.5 * fr.h
+        ax.plot(fr.positions[-1][ring, 0], fr.positions[-1][ring, 1], ".", color="tab:red", ms=1)
+        ax.set_xlim(lo[0] - 0.4, hi[0] + 0.6)
+        ax.set_ylim(lo[1] - 0.3, hi[1] + 0.3)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title(f"{wind}: |u| at z = {fr.slice_z:.3g} m", fontsize=9)
+        ax.annotate(
+            "wind",
+            (0.26, 0.93),
+            xytext=(0.04, 0.93),
+            xycoords="axes fraction",
+            arrowprops={"arrowstyle": "->", "color": "w"},
+            color="w",
+            va="center",
+            fontsize=8,
+        )
+        slice_axes.append(ax)
+        sides.append((wind, *shirt_pressure(fr, direction)))
+    fig.colorbar(
+        _mappable(norm, PRESSURE_CMAP),
+        ax=cloth_axes,
+        label="|F| / A (Pa)",
+        shrink=0.6,
+        pad=0.08,  # clear of the 3D axes' z labels
+        extend="max",
     )
-    missing = {"particles", "global"} - {w for w, _ in present}
+    fig.colorbar(im, ax=slice_axes, label="wind speed (m/s)", shrink=0.8)
+    t = float(present[0][2].times[-1])
+    measured = "; ".join(
+        f"{w} {front:.3g} / {back:.3g} Pa (back/front {back / front:.3g})"
+        for w, front, back in sides
+    )
+    caption = (
+        f"The shirt at t = {t:.2f} s seen from upwind (top row) and from downwind (middle "
+        "row), every triangle coloured by its aerodynamic pressure |F| / A on one scale; "
+        f"bottom: wind speed in the horizontal slice through the chest (z = "
+        f"{present[0][2].slice_z:.3g} m; red: shirt vertices within half a cell of it, dark "
+        "grey: the body). The global field has no lee: every triangle sees the same wind, "
+        "so front and back differ only by their angle to it; a back/front ratio below that "
+        "of the global field is the shelter of the body. Measured mean pressure front / back "
+        "(area-weighted, time mean over the second half of the run; front = triangles upwind "
+        f"of the shirt's centre): {measured}. Runs: "
+        + "; ".join(_run_note(r) for _, r, _ in present)
+    )
+    missing = set(SHIRT_WINDS) - {w for w, _, _ in present}
     if missing:
-        caption += ". Not in the inputs: " + ", ".join(f"`wind={w}`" for w in sorted(missing))
+        caption += ". Not in the inputs (or without frames): " + ", ".join(
+            f"`wind={w}`" for w in sorted(missing)
+        )
     return Drawn("fig6_shirt", title, caption + ".", fig)
+
+
+def _mappable(norm, cmap):
+    from matplotlib.cm import ScalarMappable
+
+    return ScalarMappable(norm=norm, cmap=cmap)
 
 
 def tagging_field(ds: xr.Dataset) -> np.ndarray:
@@ -439,7 +688,7 @@ def fig_opposing_sources(records: Sequence[RunRecord]) -> Drawn | Missing:
                 field.T, origin="lower", extent=_extent(ds), vmin=-u, vmax=u, cmap="RdBu_r"
             )
             _draw_bodies_xy(ax, scene, float(ds["z"].values[iz]))
-            ax.set_title(f"{label}\nRMS |u_x| = {np.sqrt(np.mean(field**2)):.2f} m/s", fontsize=9)
+            ax.set_title(f"{label}\nRMS |u_x| = {np.sqrt(np.mean(field**2)):.3g} m/s", fontsize=9)
             ax.set_xlabel("x (m)")
             ax.set_ylabel("y (m)")
             ax.set_aspect("equal")
@@ -545,8 +794,31 @@ def _cost_drawn(ax, xlabel: str, drawn: Drawn) -> Drawn:
     ax.set_xlabel(xlabel)
     ax.set_ylabel("wall time per step (ms)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    _legend_outside(drawn.figure, ax.get_legend_handles_labels()[0])
     return drawn
+
+
+def _legend_outside(fig: Figure, handles, where: str = "outside right upper", **kw) -> None:
+    """The figure's key beside the axes (never over the data)."""
+    if handles:
+        fig.legend(handles=handles, loc=where, fontsize=7, frameon=False, **kw)
+
+
+def _shared_key(winds, scenes, third_name: str = "", third=()) -> list:
+    """Proxies for a key that is shared by all lines: colour = backend, marker = scene,
+    line style = a third setting (e.g. resolution), instead of one entry per line."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=_color(w), lw=2, label=w) for w in winds]
+    handles += [
+        Line2D([], [], color="0.4", ls="", marker=MARKERS[i % len(MARKERS)], label=sc)
+        for i, sc in enumerate(scenes)
+    ]
+    handles += [
+        Line2D([], [], color="k", ls=LINESTYLES[i % len(LINESTYLES)], label=f"{third_name} {v}")
+        for i, v in enumerate(third)
+    ]
+    return handles
 
 
 def fig_cost_particles(df: pd.DataFrame) -> Drawn | Missing:
@@ -567,7 +839,7 @@ def fig_cost_particles(df: pd.DataFrame) -> Drawn | Missing:
     ax = fig.add_subplot()
     for i, (scene, g) in enumerate(d.groupby("scene", sort=True)):
         p = fit_exponent(g["live_particles"], g[COST])
-        label = scene + (f": p = {p:.2f}" if np.isfinite(p) else "")
+        label = scene + (f": p = {p:.3g}" if np.isfinite(p) else "")
         ax.loglog(g["live_particles"], g[COST] * 1e3, MARKERS[i % len(MARKERS)], label=label)
     caption = (
         "Median wall time per step of the particle backend against its mean number of live "
@@ -590,14 +862,12 @@ def _against(df: pd.DataFrame, spec: Against) -> Drawn | Missing:
     styles = {v: LINESTYLES[i % len(LINESTYLES)] for i, v in enumerate(third)}
     for key, s in _series(d, x, y, by):
         wind, scene = key[0], key[1]
-        extra = f" r={key[2]}" if len(key) > 2 else ""
         ax.plot(
             s.index.values,
             s.values,
             marker=MARKERS[scenes.index(scene) % len(MARKERS)],
             linestyle=styles.get(key[2], "-") if len(key) > 2 else "-",
             color=_color(wind),
-            label=f"{wind} / {scene}{extra}",
         )
     if spec.logy and (d[y] > 0).all():
         ax.set_yscale("log")
@@ -608,8 +878,14 @@ def _against(df: pd.DataFrame, spec: Against) -> Drawn | Missing:
     ax.set_xlabel(spec.xlabel)
     ax.set_ylabel(spec.ylabel)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    winds = sorted(d["wind"].unique(), key=_backend_order)
+    _legend_outside(fig, _shared_key(winds, scenes, by[2] if third else "", third))
     return Drawn(spec.name, spec.title, spec.caption, fig)
+
+
+def _backend_order(wind: str):
+    order = list(BACKEND_COLORS)
+    return (order.index(wind) if wind in order else len(order), wind)
 
 
 @dataclass(frozen=True)
@@ -719,7 +995,7 @@ def fig_plate(params: AeroParams) -> Drawn:
     ax.set_ylabel("force coefficient")
     ax.set_xlim(0, 92)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
+    _legend_outside(fig, ax.get_legend_handles_labels()[0], "outside lower center", ncol=2)
     caption = (
         "Drag and lift coefficients (force / (½ ρ v² A)) of the paper's §3 law for a flat plate "
         "at angle of attack α, with Hoerner's (Fluid-Dynamic Lift, 1985) long-plate normal-force "
@@ -729,7 +1005,10 @@ def fig_plate(params: AeroParams) -> Drawn:
 
 
 def fig_lee_in_time(records: Sequence[RunRecord]) -> Drawn | Missing:
-    """lee_speed_ratio against time, the finest run of each backend, one panel per scene."""
+    """lee_speed_ratio against time, the finest run of each backend, one panel per scene;
+    for particle tracing, the time its gust front has passed the whole lee box."""
+    from matplotlib.lines import Line2D
+
     title = TITLES["lee_in_time"]
     good = [r for r in records if r.status == "complete"]
     scenes = sorted(
@@ -737,31 +1016,53 @@ def fig_lee_in_time(records: Sequence[RunRecord]) -> Drawn | Missing:
     )
     if not scenes:
         return Missing("lee_in_time", title, "runs of a scene with lee and free-stream probes")
-    fig = _figure(min(4.0 * len(scenes), 16.0), 3.4)
+    fig = _figure(min(3.6 * len(scenes), 16.0), 3.6)
+    winds_shown, passed = set(), []
     for c, scene in enumerate(scenes):
         ax = fig.add_subplot(1, len(scenes), c + 1)
         for wind in sorted({r.settings["wind"] for r in good if r.settings["scene"] == scene}):
             rec = pick(good, scene, wind)
             with xr.open_dataset(rec.path) as ds:
-                if "lee_speed_ratio" in ds:
-                    ax.plot(
-                        ds["time"].values,
-                        ds["lee_speed_ratio"].values,
-                        color=_color(wind),
-                        label=wind,
-                    )
+                if "lee_speed_ratio" not in ds:
+                    continue
+                ax.plot(ds["time"].values, ds["lee_speed_ratio"].values, color=_color(wind))
+                winds_shown.add(wind)
+                t_pass = _front_past_lee(ds, rec.path)
+            if np.isfinite(t_pass):
+                ax.axvline(t_pass, color=_color(wind), ls=":", lw=1.2)
+                passed.append(f"{scene} {t_pass:.2f} s")
         ax.set_title(scene, fontsize=9)
         ax.set_xlabel("t (s)")
         ax.set_ylim(bottom=0)
         ax.grid(True, alpha=0.3)
         if c == 0:
             ax.set_ylabel("mean |u| lee / free stream")
-            ax.legend(fontsize=7)
+    handles = _shared_key(sorted(winds_shown, key=_backend_order), [])
+    if passed:
+        handles.append(
+            Line2D([], [], color=_color("particles"), ls=":", label="particle front past lee box")
+        )
+    _legend_outside(fig, handles, "outside lower center", ncol=len(handles))
     caption = (
         "Mean wind speed in each scene's lee box over that in its free-stream box, finest run "
-        "of each backend; 1 means no lee, 0 a perfect wind shadow."
+        "of each backend; 1 means no lee, 0 a perfect wind shadow. The particle backend has "
+        "wind only where its gust particles have arrived: until its front has passed the "
+        "whole lee box (dotted line, from the recorded frames"
+        + (": " + ", ".join(passed) if passed else "; none recorded")
+        + ") a ratio below 1 is partly wind not yet arrived, not lee."
     )
     return Drawn("lee_in_time", title, caption, fig)
+
+
+def _front_past_lee(ds: xr.Dataset, path) -> float:
+    """When the particles' gust front had passed the scene's whole lee box (nan: unknown)."""
+    frames = read_frames(ds, path)
+    scene = scene_of(ds)
+    direction = wind_direction(scene)
+    box = scene.probes.get("lee")
+    if frames is None or direction is None or box is None:
+        return math.nan
+    return front_passes(frames, box.lower, box.upper, direction)
 
 
 RUN_FIGURES = {  # figures drawn from run datasets, in the order of the report

@@ -6,7 +6,8 @@
   bodies and the current cloth triangles (positions, velocities).
 - ``sample(points) -> (n, 3)`` — wind velocity (m/s) at world points.
 - ``velocity() -> (nx, ny, nz, 3)`` — cell-centred wind on the grid.
-- ``stats() -> dict`` — scalar figures of the last step (recorded per time step).
+- ``stats() -> dict`` — scalar figures of the last step (recorded per time step); the class
+  table ``stats_units`` gives each figure's long_name and units for the dataset.
 - ``solid_mask() -> (nx, ny, nz) bool`` — cells that are not air (inside rigid bodies).
 
 Model (scene, grid, params: fixed) is kept apart from state (arrays that change).
@@ -47,11 +48,18 @@ class WindField(ABC):
 
     name: ClassVar[str] = ""
     max_cfl: ClassVar[float] = float("inf")  # above it the run warns (see simulate.prepare)
+    stats_units: ClassVar[dict[str, tuple[str, str]]] = {}  # stats() key -> (long_name, units)
 
     @classmethod
     def check(cls, scene, grid: Grid, params: Any) -> None:
         """Raise ConfigError for bad ``wind.*`` values before any work (default: none)."""
         return None
+
+    @classmethod
+    def memory(cls, scene, grid: Grid, params: Any, dt: float) -> dict[str, tuple[float, str]]:
+        """Bytes the backend holds beyond the per-cell budget of simulate.BYTES_PER_CELL, by
+        the config key they scale with: ``{key: (bytes, what)}`` (default: nothing)."""
+        return {}
 
     def __init__(self, scene, grid: Grid, params: Any):
         self.scene = scene

@@ -140,6 +140,19 @@ class NavierStokesWind(WindField):
     # Semi-Lagrangian advection is stable at any CFL, but a backtrace longer than a few
     # cells jumps over thin walls and smears the flow: warn above 5 (Foster & Fedkiw 2001).
     max_cfl = 5.0
+    stats_units = {
+        "pressure_iterations": (
+            "iterations of the pressure solve (multigrid-preconditioned CG)",
+            "1",
+        ),
+        "pressure_residual": ("relative residual of the pressure solve", "1"),
+        "pressure_rhs_norm": ("||h div u*||_2 before the projection", "m s-1"),
+        "mac_divergence_max": ("max of |div u| h / U_ref of the MAC divergence on air cells", "1"),
+        "mac_divergence_rms": ("RMS of |div u| h / U_ref of the MAC divergence on air cells", "1"),
+        "diffusion_sweeps": ("sweeps of the implicit diffusion solve", "1"),
+        "cfl": ("CFL number max|u| dt / h of the step", "1"),
+        "cloth_cells": ("cells marked by the cloth (coupling)", "1"),
+    }
 
     @classmethod
     def check(cls, scene, grid, params) -> None:

@@ -99,6 +99,10 @@ SORT_EVERY = 8  # steps between reorderings of the particles by cell (memory loc
 # are sparse (fewer than one per two cells); denser particles find their cells in cache.
 PREFETCH_CELLS = 1 << 16
 PREFETCH_DENSITY = 0.5  # particles per cell
+# memory budget (bytes): a live particle (position, source, age, doubling buffers, sort
+# copies) and a candidate of one step's emission (position, source, instant, duration)
+BYTES_PER_PARTICLE = 128
+BYTES_PER_CANDIDATE = 128
 
 
 @dataclass
@@ -127,6 +131,7 @@ def _check(params) -> None:
         ("particles_per_cell", params.particles_per_cell > 0, "> 0"),
         ("particles_per_second", auto or params.particles_per_second >= 0, ">= 0 or null"),
         ("deflected_cells", params.deflected_cells in MARK_MODES, f"one of {sorted(MARK_MODES)}"),
+        ("seed", params.seed >= 0, ">= 0"),
     ]
     for key, ok, allowed in checks:
         if not ok:
@@ -137,11 +142,41 @@ def _check(params) -> None:
 class ParticleWind(WindField):
     """Gust particles per source; u = sum of the reached sources' w_i (module docstring)."""
 
+    stats_units = {
+        "live_particles": ("particles alive after the step", "1"),
+        "emitted_particles": ("particles emitted in the step", "1"),
+        "dropped_particles": ("emitted particles dropped (outside, in a body, over the cap)", "1"),
+        "cell_crossings": ("cell faces crossed by the particles in the step", "1"),
+        "particle_steps_per_second": ("particles traced per second of tracing time", "s-1"),
+    }
+
     @classmethod
     def check(cls, scene, grid, params) -> None:
         """Raise ConfigError for bad ``wind.*`` values or source ``emit``/``gusts`` keys."""
         _check(params)
         emitters_from_scene(scene, grid, params, int(params.seed))
+
+    @classmethod
+    def memory(cls, scene, grid, params, dt) -> dict[str, tuple[float, str]]:
+        """Live particles (at most ``max_particles``, at most rate x ``max_age``), one step's
+        emission candidates, and the per-source cell marks of a multi-source scene."""
+        rate = sum(e.rate for e in emitters_from_scene(scene, grid, params, int(params.seed)))
+        live = min(float(params.max_particles), rate * float(params.max_age))
+        n_src = len(scene.sources)
+        rate_key = (
+            "particles_per_cell" if params.particles_per_second is None else "particles_per_second"
+        )
+        return {
+            "wind.max_particles": (live * BYTES_PER_PARTICLE, f"up to {live:.3g} live particles"),
+            f"wind.{rate_key}": (
+                rate * dt * BYTES_PER_CANDIDATE,
+                f"{rate * dt:.3g} particles emitted per step",
+            ),
+            "scene.sources": (
+                grid.n_cells * n_src * 32.0 if n_src > 1 else 0.0,
+                f"marks of {n_src} sources in {grid.n_cells} cells",
+            ),
+        }
 
     def __init__(self, scene, grid, params):
         super().__init__(scene, grid, params)
