@@ -84,23 +84,15 @@ def force_ratio(sheltered_force: np.ndarray, exposed_force: np.ndarray) -> float
     return float(np.linalg.norm(sheltered_force)) / exposed if exposed > 0 else float("nan")
 
 
-MIN_WINDOW_STEPS = 10  # a steady window holds at least this many recorded steps
-MIN_WINDOW_FLOW_THROUGHS = 0.25  # ... and lasts at least this fraction of a flow-through
-
-
-def unsettled_reason(times, analysis_start: float, flow_through: float) -> str:
-    """Why a run's recorded ``times`` hold no steady window after ``analysis_start``
-    (empty when they do): fewer than MIN_WINDOW_STEPS steps, or shorter than
-    MIN_WINDOW_FLOW_THROUGHS of a flow-through time."""
+def unsettled_reason(times, analysis_start: float) -> str:
+    """Why a run's recorded ``times`` hold no steady window (no step at or after
+    ``analysis_start``); empty when they hold one."""
     times = np.asarray(times, dtype=float)
-    inside = times[times >= analysis_start - 1e-9]
+    if times.size and times[-1] >= analysis_start - 1e-9:
+        return ""
     end = float(times[-1]) if times.size else 0.0
-    span = float(inside[-1] - analysis_start) if inside.size else 0.0
-    need = MIN_WINDOW_FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
-    if inside.size < MIN_WINDOW_STEPS or span < need:
-        return (
-            f"no steady window: recorded until t = {end:.3g} s, statistics start at "
-            f"{analysis_start:.3g} s ({inside.size} steps, {span:.3g} s in the window; "
-            f"needs {MIN_WINDOW_STEPS} steps and {need:.3g} s)"
-        )
-    return ""
+    return (
+        f"no steady window: recorded until t = {end:.3g} s, statistics start at "
+        f"{analysis_start:.3g} s (two flow-through times; use sim.spinup=auto or a longer "
+        "sim.duration)"
+    )

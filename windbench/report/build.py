@@ -87,7 +87,8 @@ def _reference_note(refs: dict[str, Reference], reference_dir) -> str:
         "(`wind.advection=second_order`; another scheme where there is none) among the inputs"
     )
     if reference_dir:
-        src = f"the finest such run under `--reference {reference_dir}`, else " + src
+        given = " ".join(str(d) for d in _folders(reference_dir))
+        src = f"the finest such run under `--reference {given}`, else " + src
     unconverged = sorted(s for s, r in refs.items() if r.converged is False)
     flag = (
         f" **Not converged** (uncertainty larger than the smallest error it ranks): "
@@ -212,10 +213,17 @@ def _read(inputs: Sequence, reference, progress: bool):
     if not records:
         raise FileNotFoundError(f"no windbench.nc under {[str(i) for i in inputs]}")
     mark_duplicates(records)
-    ref_records = read_runs(find_runs([reference]), progress=progress) if reference else None
+    ref_records = (
+        read_runs(find_runs(_folders(reference)), progress=progress) if reference else None
+    )
     refs = choose_references(records, ref_records)
     assign_lee_errors([*records, *(ref_records or [])], refs)
     return records, refs
+
+
+def _folders(reference) -> list:
+    """``--reference`` as a list of folders (one folder or several)."""
+    return list(reference) if isinstance(reference, list | tuple) else [reference]
 
 
 def _write_data(records, refs: dict[str, Reference], out: Path, name: str) -> pd.DataFrame:

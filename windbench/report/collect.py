@@ -400,11 +400,7 @@ def _unsettled(ds: xr.Dataset) -> str:
     """The reason a run has no steady window ('' if it has one or predates the attribute)."""
     if "analysis_start" not in ds.attrs or not ds.sizes.get("time", 0):
         return ""
-    return unsettled_reason(
-        ds["time"].values,
-        float(ds.attrs["analysis_start"]),
-        float(ds.attrs.get("flow_through_time", math.nan)),
-    )
+    return unsettled_reason(ds["time"].values, float(ds.attrs["analysis_start"]))
 
 
 def _wake(ds: xr.Dataset) -> pd.DataFrame | None:

@@ -14,6 +14,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from windbench.report.collect import display_path
 from windbench.report.figures import Drawn, Missing, _color, _figure
 from windbench.report.lee import Reference
 
@@ -76,6 +77,7 @@ def reference_table(refs: dict[str, Reference]) -> pd.DataFrame:
             {
                 "scene": scene,
                 "reference": ref.run.label,
+                "file": display_path(ref.path),
                 "scheme": ref.run.config.get("wind.advection", "?"),
                 "levels": ", ".join(str(r.settings.get("resolution")) for r in ref.levels),
                 "e21": ref.difference,

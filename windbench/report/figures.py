@@ -345,11 +345,17 @@ def regenerate(records: Sequence[RunRecord], inputs: Sequence, out, reference=No
     from windbench.report.collect import display_path
 
     experiments = {r.experiment for r in records if r.experiment}
-    runs = f"windbench -m experiment={experiments.pop()} && " if len(experiments) == 1 else ""
     args = " ".join(display_path(Path(i)) for i in inputs)
     if reference:
-        args += f" --reference {display_path(Path(reference))}"
-    return f"Regenerate: `{runs}windbench-report {args} --out {display_path(Path(out))}`."
+        folders = reference if isinstance(reference, list | tuple) else [reference]
+        args += " --reference " + " ".join(display_path(Path(f)) for f in folders)
+    report = f"windbench-report {args} --out {display_path(Path(out))}"
+    if len(experiments) != 1:
+        return f"Regenerate: `{report}`."
+    name = experiments.pop()
+    if len(inputs) > 1 or reference:  # several sweeps: the experiment file lists them
+        return f"Regenerate: the sweeps listed in `conf/experiment/{name}.yaml`, then `{report}`."
+    return f"Regenerate: `windbench -m experiment={name} && {report}`."
 
 
 def _figure(width: float, height: float) -> Figure:

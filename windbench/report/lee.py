@@ -179,4 +179,4 @@ def assign_lee_errors(records: Sequence[RunRecord], refs: dict[str, Reference]) 
             and np.isfinite(r.figures.get("lee_error", math.nan))
         ]
         if ranked and np.isfinite(ref.gci):
-            ref.converged = bool(ref.gci < min(ranked))
+            ref.converged = bool(ref.gci <= min(ranked))

@@ -152,6 +152,8 @@ class NavierStokesWind(WindField):
         "diffusion_sweeps": ("sweeps of the implicit diffusion solve", "1"),
         "cfl": ("CFL number max|u| dt / h of the step", "1"),
         "cloth_cells": ("cells marked by the cloth (coupling)", "1"),
+        "eddy_viscosity_max": ("largest eddy viscosity of the step (wind.turbulence)", "m2 s-1"),
+        "eddy_substeps": ("explicit substeps of the eddy-viscosity term", "1"),
     }
 
     @classmethod
