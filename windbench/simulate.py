@@ -23,7 +23,7 @@ from tqdm.auto import tqdm
 
 from windbench import metrics
 from windbench.aero import AeroParams, aerodynamic_forces
-from windbench.cloth import make_cloth_solver
+from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.dataset import annotate, git_commit, package_versions, runtime_info, write_atomic
 from windbench.errors import ConfigError, SimulationDiverged
@@ -85,7 +85,7 @@ def prepare(cfg: DictConfig) -> RunSetup:
     n_steps = int(round(duration / dt))
     snaps = np.unique(np.round(np.linspace(0, n_steps, cfg.output.snapshots + 1)[1:]).astype(int))
     model = ClothModel.from_meshes(scene.cloths)
-    make_cloth_solver(cfg.cloth, model, scene.bodies)  # unknown solver or material: fail now
+    check_cloth_solver(cfg.cloth, model)  # unknown solver, bad setting or material: fail now
     return RunSetup(
         cfg=cfg,
         scene=scene,
