@@ -8,13 +8,13 @@ flat body faces, and the energy bound of the divergence check.
 import numpy as np
 import pytest
 
-from windbench.aero import AeroParams, aerodynamic_forces
+from windbench.aero import aerodynamic_forces
 from windbench.cloth import make_cloth_solver
 from windbench.cloth.collision import max_penetration
 from windbench.cloth.mesh import flag_mesh
 from windbench.cloth.model import ClothModel
 from windbench.cloth.solver import XPBDCloth
-from windbench.config import ClothConfig
+from windbench.config import AeroConfig, ClothConfig
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import body_from_config, distances
 
@@ -37,7 +37,7 @@ def _run_from(solver, model, state, frames, forces=None, air=True):
     for _ in range(frames):
         f = zero if forces is None else forces
         if air:  # still air: the paper's air resistance (§3 with u = 0)
-            params = air if isinstance(air, AeroParams) else AeroParams()
+            params = air if isinstance(air, AeroConfig) else AeroConfig()
             f = aerodynamic_forces(
                 state.positions, state.velocities, zero, model.triangles, params
             )[1]
@@ -106,7 +106,7 @@ def test_cantilever_sag_matches_the_hinge_chain_statics(cells, rows, bend_every)
     solver = XPBDCloth(model, (), cfg)
     assert solver.frame_constants(DT).bend_every == bend_every
     # thick still air settles the strip (drag vanishes at rest, so the statics are untouched)
-    state, energy = _run(solver, model, 600, air=AeroParams(drag_coefficient=20.0))
+    state, energy = _run(solver, model, 600, air=AeroConfig(drag_coefficient=20.0))
     hu = length / cells
     column_mass = np.full(cells + 1, rho * width * hu)
     column_mass[-1] /= 2

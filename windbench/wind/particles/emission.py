@@ -264,7 +264,7 @@ def gust_schedule(spec, key: str) -> GustSchedule:
     return GustSchedule(
         on=_positive(spec, "on", key),
         off=_positive(spec, "off", key, allow_zero=True),
-        start=float(spec.get("start", 0.0)),
+        start=float(spec.get("start", GustSchedule.start)),
     )
 
 
