@@ -33,7 +33,7 @@ def fast_atan2(y, x):
     """atan2(y, x) from the polynomial of Abramowitz & Stegun 4.4.49 (|error| <= 2e-8 rad).
 
     atan(a) = a (1 + sum_k c_k a^2k) on [0, 1] with a = min/max of |x|, |y|, then the octant
-    symmetries; about three times cheaper than the libm call in the hinge loop. The
+    symmetries; cheaper than the libm call in the hinge loop. The
     polynomial is evaluated by Estrin's scheme (powers s^2, s^4 computed beside the pairs)
     rather than Horner's: the same terms in a third of the dependent multiply-adds.
     """
