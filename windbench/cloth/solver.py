@@ -142,23 +142,13 @@ def _predict(c, f_ext, h, x, p, v):
 @njit(cache=True)
 def _distance_passes(c, frame, iterations, p, lam, chain_work):
     """Step 2a: ``iterations`` passes over the threads, the first also over the shear edges."""
+    alpha, scale = frame.edge_alpha, frame.edge_scale
     for it in range(iterations):
         solve_chains(
-            p,
-            c.inv_mass,
-            c.chain_ptr,
-            c.chain_vert,
-            c.edge_rest,
-            frame.edge_alpha,
-            frame.edge_scale,
-            lam,
-            chain_work,
+            p, c.inv_mass, c.chain_ptr, c.chain_vert, c.edge_rest, alpha, scale, lam, chain_work
         )
         if it == 0:
-            e_alpha, e_scale = frame.edge_alpha, frame.edge_scale
-            project_shear_edges(
-                p, c.inv_mass, c.edges, c.edge_rest, e_alpha, e_scale, lam, c.n_stretch
-            )
+            project_shear_edges(p, c.inv_mass, c.edges, c.edge_rest, alpha, scale, lam, c.n_stretch)
 
 
 @njit(cache=True)
@@ -177,20 +167,11 @@ def _strain_limit(model, frame, p, xp, lam, chain_work, normal):
     """Step 3b: limit passes over the threads, the contacts after each, until every
     thread keeps the limit (at most ``limit_passes``)."""
     c, s = model.constraints, model.settings
+    alpha, scale = frame.edge_alpha, frame.edge_scale
     has_bodies = model.contacts.kinds.shape[0] > 0
     for _ in range(s.limit_passes if s.strain_limit > 0.0 else 0):
-        solved = solve_chains(
-            p,
-            c.inv_mass,
-            c.chain_ptr,
-            c.chain_vert,
-            c.edge_rest,
-            frame.edge_alpha,
-            frame.edge_scale,
-            lam,
-            chain_work,
-            s.strain_limit,
-        )
+        ptr, vert, rest, limit = c.chain_ptr, c.chain_vert, c.edge_rest, s.strain_limit
+        solved = solve_chains(p, c.inv_mass, ptr, vert, rest, alpha, scale, lam, chain_work, limit)
         if solved == 0:  # every thread kept it: nothing moved
             break
         if has_bodies:  # the contacts again, so that they hold at the end
