@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from windbench.aero import aerodynamic_forces
-from windbench.cloth import make_cloth_solver
+from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.collision import max_penetration
 from windbench.cloth.mesh import flag_mesh
 from windbench.cloth.model import ClothModel
@@ -218,9 +218,10 @@ def test_bad_solver_settings_name_their_key(change, key):
     cfg = ClothConfig()
     for k, v in change.items():
         setattr(cfg, k, v)
-    with pytest.raises(ConfigError) as err:
-        make_cloth_solver(cfg, _cloth(n=4), ())
-    assert err.value.key == key
+    for build in (check_cloth_solver, lambda c, m: make_cloth_solver(c, m, ())):
+        with pytest.raises(ConfigError) as err:
+            build(cfg, _cloth(n=4))  # check_cloth_solver: what prepare() calls
+        assert err.value.key == key
 
 
 @pytest.mark.parametrize(
@@ -233,9 +234,10 @@ def test_bad_solver_settings_name_their_key(change, key):
     ],
 )
 def test_bad_material_names_its_key(material, key):
-    with pytest.raises(ConfigError) as err:
-        XPBDCloth(_cloth(n=4, **material), (), ClothConfig())
-    assert err.value.key == key
+    for build in (XPBDCloth.check, lambda m, c: XPBDCloth(m, (), c)):
+        with pytest.raises(ConfigError) as err:
+            build(_cloth(n=4, **material), ClothConfig())
+        assert err.value.key == key
 
 
 @pytest.mark.parametrize(
