@@ -156,9 +156,10 @@ def particle_model(scene, grid, params) -> ParticleModel:
 @dataclass(frozen=True)
 class ParticleState:
     """What changes: the live particles 0..n-1 of buffers grown on demand, the per-cell
-    marks, values and u (:class:`~.tracing.CellState`, updated in place), the cells the
-    cloth flagged last step, the emission counters and the cells marked in each of the
-    last steps (their marks lapse ``memory`` later)."""
+    marks, values and u (:class:`~.tracing.CellState`), the cells the cloth flagged last
+    step, the emission counters and the cells marked in each of the last steps (their
+    marks lapse ``memory`` later). The arrays are large and the kernels update them in
+    place; :func:`advance` returns the state with the rest replaced."""
 
     time: float
     steps: int
