@@ -39,7 +39,7 @@ class Box:
 
 @dataclass(frozen=True)
 class Scene:
-    """Model of one scene; see DESIGN.md "Scene config" for the keys."""
+    """Model of one scene; see docs/design.md "Scene config" for the keys."""
 
     name: str
     lower: np.ndarray
