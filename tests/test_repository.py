@@ -29,7 +29,7 @@ HISTORY = re.compile(
     r"\bissues?\s*#?\d+"  # issue 6, issue #3, issues 4
     r"|\b(?:PR|pull request)\s*#?\d+"
     r"|\(#\d+\)"
-    r"|\bsessions?\b"
+    r"|(?<!scope=\")\bsessions?\b"
     r"|\bwork periods?\b"
     r"|\b(?:first|second|third|fourth|fifth|sixth|seventh|eighth|ninth|tenth|\d+(?:st|nd|rd|th))"
     r"\s+(?:round|period|session|stage)\b",
