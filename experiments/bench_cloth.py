@@ -1,6 +1,6 @@
 """Speed of the coupled cloth step: frames per second of the flag scene at three resolutions.
 
-Targets (issue 5), per 1/60 s frame including wind sampling, aerodynamics (paper §3) and
+Targets, per 1/60 s frame including wind sampling, aerodynamics (paper §3) and
 body collisions: a 40 x 25 flag >= 300 frames/s, a 64 x 64 cloth >= 60, a 100 x 60 flag
 >= 30. Each case runs the real loop (``windbench.simulate.Simulation``, ``wind=global``,
 ``scene=flag`` with ``scene.cloths.0.resolution=[nu,nv]``) for a few warm-up frames
@@ -10,7 +10,7 @@ and the best of the loop's own ``step_seconds`` phases (wind, aero, cloth, total
     PYTHONPATH=$PWD python experiments/bench_cloth.py [--frames 120] [--substeps 16] [key=value ...]
 
 writes ``experiments/results/bench_cloth.csv`` (one row per case). With ``--stretch`` it
-records instead how far the stiff membrane stretches at the three sizes (issue 5: under 5%):
+records instead how far the stiff membrane stretches at the three sizes (target: under 5%):
 the flag hanging from its pole in still air (``scene.sources=[]``; the largest warp/weft
 edge strain at the end of 4 s and its maximum over the last 2 s) and in its 6 m/s wind
 (the median and the maximum of the largest edge strain over 0.5-4 s), into

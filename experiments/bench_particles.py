@@ -1,4 +1,4 @@
-"""Step cost of the ``particles`` backend against grid size and particle count (issue 4).
+"""Step cost of the ``particles`` backend against grid size and particle count.
 
 For each grid resolution (cells along the longest axis) and particle count, the fence
 scene (6 m/s through an 8 m x 4 m x 4 m box with a wall) is filled with that many
@@ -13,7 +13,7 @@ when the row was measured (the 2 cores are shared with other work).
     PYTHONPATH=. python experiments/bench_particles.py            # full table
     PYTHONPATH=. python experiments/bench_particles.py --quick    # 16, 32 x 1e4, 1e5
 
-Writes ``experiments/results/bench_particles.csv``. Targets (issue 4): at least 5e6
+Writes ``experiments/results/bench_particles.csv``. Targets: at least 5e6
 cell crossings per second, and step time growing no faster than linearly in particles.
 """
 

@@ -1,4 +1,4 @@
-"""Where a flag hanging from its pole in still air stretches: a diagnostic of issue 5.
+"""Where a flag hanging from its pole in still air stretches: a diagnostic of the solver.
 
 Runs the flag scene (``scene=flag``, ``wind=global``, ``scene.sources=[]``, resolution
 ``nu x nv``) for ``--frames`` frames and prints, every 30 frames, the largest warp/weft edge
@@ -39,9 +39,8 @@ def main() -> None:
     nu, nv = args.nu, args.nv
     at = {int(a) for a in args.at.split(",") if a}
     sim = flag_simulation((nu, nv), args.frames, True, args.overrides)
-    solver = sim.cloth_solver
-    edges, rest = solver._edge_arrays[0], solver._edge_arrays[1]
-    ns = solver.n_stretch
+    tables = sim.cloth_solver.tables.constraints
+    edges, rest, ns = tables.edges, tables.edge_rest, tables.n_stretch
 
     def strains() -> np.ndarray:
         x = sim.state.positions

@@ -6,9 +6,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from windbench.aero import AeroParams, aerodynamic_forces, plate_coefficients
+from windbench.aero import aerodynamic_forces, plate_coefficients
+from windbench.config import AeroConfig
 
-P = AeroParams(drag_coefficient=1.17, lift_coefficient=0.6, air_density=1.2)
+P = AeroConfig(drag_coefficient=1.17, lift_coefficient=0.6, air_density=1.2)
 SQUARE = np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1.0]])  # unit plate in x = 0
 SQUARE_TRIS = np.array([[0, 1, 2], [0, 2, 3]])
 

@@ -30,21 +30,12 @@ to the triangle force. Zero relative velocity or zero area gives zero force, nev
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from numba import njit
 
-RHO_AIR = 1.2  # kg/m^3
+from windbench.config import AeroConfig
 
-
-@dataclass(frozen=True)
-class AeroParams:
-    """Coefficients of the paper's §3 force law (SI units)."""
-
-    drag_coefficient: float = 1.2  # C_D; Hoerner: 1.17 for a square plate normal to the flow
-    lift_coefficient: float = 0.6  # C_L
-    air_density: float = RHO_AIR  # rho, kg/m^3
+AeroParams = AeroConfig  # one class for the §3 coefficients: the schema of the aero.* keys
 
 
 @njit(cache=True, inline="always")
@@ -107,7 +98,7 @@ def triangle_forces(positions, velocities, wind, triangles, c_d, c_l, rho, tri_o
             vertex_out[c, k] += share
 
 
-def aerodynamic_forces(positions, velocities, wind, triangles, params: AeroParams):
+def aerodynamic_forces(positions, velocities, wind, triangles, params: AeroConfig):
     """(per-triangle forces ``(m, 3)``, per-vertex forces ``(n, 3)``) in newtons."""
     tri = np.empty((triangles.shape[0], 3))
     vert = np.empty((positions.shape[0], 3))
@@ -125,7 +116,7 @@ def aerodynamic_forces(positions, velocities, wind, triangles, params: AeroParam
     return tri, vert
 
 
-def plate_coefficients(alpha, params: AeroParams):
+def plate_coefficients(alpha, params: AeroConfig):
     """Drag and lift coefficients of the §3 law for a flat plate at angle of attack alpha.
 
     Normalised by 1/2 rho v^2 A: ``C_D sin(alpha)`` along the wind and

@@ -145,9 +145,8 @@ def trilinear_sample(field, origin, h, points, out):
     """out[p, :] = field interpolated trilinearly at points[p] (lattice origin, spacing h).
 
     Serial on purpose, like the other point-set kernels (aero, collisions): the point sets
-    are cloth-sized (1e3-1e4), where starting threads cost more than they save, and far
-    more on a loaded machine or in a parallel sweep (measured 10-25 ms per call against
-    0.4 ms serial at load 8 on 2 cores).
+    are cloth-sized (1e3-1e4), where starting threads costs more than it saves, and far
+    more on a loaded machine or in a parallel sweep.
     """
     for p in range(points.shape[0]):
         trilinear_point(field, origin, h, points[p, 0], points[p, 1], points[p, 2], out[p])

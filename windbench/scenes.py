@@ -95,7 +95,7 @@ def _wake(spec, domain: Box) -> WakeProbe:
 
 @dataclass(frozen=True)
 class Scene:
-    """Model of one scene; see DESIGN.md "Scene config" for the keys."""
+    """Model of one scene; see docs/design.md "Scene config" for the keys."""
 
     name: str
     lower: np.ndarray

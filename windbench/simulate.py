@@ -24,7 +24,7 @@ from tqdm.auto import tqdm
 
 from windbench import metrics
 from windbench.aero import AeroParams, aerodynamic_forces
-from windbench.cloth import make_cloth_solver
+from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.config import check_values
 from windbench.dataset import git_commit, run_dataset, write_atomic
@@ -129,7 +129,7 @@ def prepare(cfg: DictConfig) -> RunSetup:
     _check_memory({**plan, **backend.memory(scene, grid, cfg.wind, dt)})
     cfl = _check_cfl(scene, grid, dt, backend)
     snaps = np.unique(np.round(np.linspace(0, n_steps, cfg.output.snapshots + 1)[1:]).astype(int))
-    make_cloth_solver(cfg.cloth, model, scene.bodies)  # unknown solver or material: fail now
+    check_cloth_solver(cfg.cloth, model)  # unknown solver, bad setting or material: fail now
     return RunSetup(
         cfg=cfg,
         scene=scene,

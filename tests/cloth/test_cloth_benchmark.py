@@ -1,8 +1,8 @@
 """Speed of one coupled frame (wind sampling, §3 aerodynamics, XPBD cloth with collisions).
 
 pytest-benchmark figures, marked slow (outside CI): run with
-``pytest -m slow tests/cloth/test_cloth_benchmark.py --benchmark-only``. The targets of
-issue 5 (40x25 flag >= 300 frames/s, 64x64 >= 60, 100x60 >= 30) are recorded, not
+``pytest -m slow tests/cloth/test_cloth_benchmark.py --benchmark-only``. The targets
+(40x25 flag >= 300 frames/s, 64x64 >= 60, 100x60 >= 30) are recorded, not
 asserted; ``experiments/bench_cloth.py`` writes the same figures to a CSV.
 """
 

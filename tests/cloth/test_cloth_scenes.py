@@ -58,7 +58,7 @@ def test_flag_in_uniform_wind_trails_downwind(tmp_path):
 
 @pytest.mark.parametrize("resolution", ["[40,25]", "[64,64]", "[100,60]"])
 def test_flag_hanging_from_its_pole_stretches_under_five_percent(resolution):
-    """Issue 5: in still air the flag hangs off its pole, the whole weight through the top
+    """In still air the flag hangs off its pole, the whole weight through the top
     corner. The threads carry it (edge by edge, ``cloth.threads=false``, the default
     substeps leave the 40 x 25 flag's top edge 11% long, thread by thread 1-2%); on the
     finer meshes the top corner collapses and only the strain limit keeps its edges short

@@ -8,14 +8,13 @@ flat body faces, and the energy bound of the divergence check.
 import numpy as np
 import pytest
 
-from windbench.aero import AeroParams, aerodynamic_forces
-from windbench.cloth import make_cloth_solver
+from windbench.aero import aerodynamic_forces
+from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.collision import max_penetration
 from windbench.cloth.mesh import flag_mesh
 from windbench.cloth.model import ClothModel
-from windbench.cloth.solver import XPBDCloth, fast_atan2, project_hinge, solve_chains
-from windbench.cloth.topology import dihedral_angles
-from windbench.config import ClothConfig
+from windbench.cloth.solver import XPBDCloth
+from windbench.config import AeroConfig, ClothConfig
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import body_from_config, distances
 
@@ -38,7 +37,7 @@ def _run_from(solver, model, state, frames, forces=None, air=True):
     for _ in range(frames):
         f = zero if forces is None else forces
         if air:  # still air: the paper's air resistance (§3 with u = 0)
-            params = air if isinstance(air, AeroParams) else AeroParams()
+            params = air if isinstance(air, AeroConfig) else AeroConfig()
             f = aerodynamic_forces(
                 state.positions, state.velocities, zero, model.triangles, params
             )[1]
@@ -83,131 +82,6 @@ def test_pinned_at_two_corners_hangs_with_little_stretch_and_comes_to_rest():
     assert energy.max() > 0.05 and energy[-1] < 1e-3 * energy.max()  # and it comes to rest
 
 
-def _vertical_chain(rest, inv_mass, alpha):
-    """Arguments of solve_chains for one chain down the z axis: vertex k joins edge k-1, k."""
-    m = len(rest)
-    scale = 1.0 / (inv_mass[:-1] + inv_mass[1:] + alpha)
-    ptr, verts = np.array([0, m]), np.arange(m + 1)
-    return ptr, verts, rest, alpha, scale, np.zeros(m), np.empty((m, 5))
-
-
-def test_one_chain_solve_makes_a_straight_inextensible_chain_exact():
-    rng = np.random.default_rng(1)
-    m = 12
-    rest = rng.uniform(0.05, 0.1, m)
-    for inv_mass in (np.r_[0.0, rng.uniform(0.5, 2.0, m)], rng.uniform(0.5, 2.0, m + 1)):
-        # collinear start: every edge 30% too long or too short, the first vertex a pin or not
-        seg = rest * rng.uniform(0.7, 1.3, m)
-        p = np.zeros((m + 1, 3))
-        p[1:, 2] = -np.cumsum(seg)
-        x = p.copy()
-        solve_chains(p, inv_mass, *_vertical_chain(rest, inv_mass, np.zeros(m)))
-        # along a line the constraints are linear: one direct solve satisfies them all
-        np.testing.assert_allclose(-np.diff(p[:, 2]), rest, rtol=1e-12)
-        np.testing.assert_array_equal(p[:, :2], 0.0)
-        if inv_mass[0] == 0.0:  # hanging from the pin: each vertex at the rest path length
-            np.testing.assert_allclose(p[1:, 2], -np.cumsum(rest), rtol=1e-12)
-        else:  # free: the mass-weighted centre does not move (momentum conserved)
-            mass = 1.0 / inv_mass
-            assert mass @ p[:, 2] == pytest.approx(mass @ x[:, 2], rel=1e-12)
-
-
-def test_strain_limit_brings_the_over_stretched_edges_of_a_chain_to_the_limit():
-    """Limit mode of solve_chains on a straight chain (linear constraints: one solve is
-    exact): edges longer than (1 + limit) L end at exactly that length (the others are
-    free: they move with their ends), repeated solves end with no edge over the trigger
-    (1 + 1.1 limit) L; the mass-weighted centre of a free chain stays put, a pin does not
-    move; a chain whose edges stay within the slack above the limit is not touched; the
-    multipliers are not used."""
-    rng = np.random.default_rng(4)
-    m, limit = 10, 0.03
-    rest = rng.uniform(0.05, 0.1, m)
-    factor = np.where(np.arange(m) % 3 == 0, 1.10, rng.uniform(0.9, 1.02, m))
-    for inv_mass in (np.r_[0.0, rng.uniform(0.5, 2.0, m)], rng.uniform(0.5, 2.0, m + 1)):
-        p = np.zeros((m + 1, 3))
-        p[1:, 2] = -np.cumsum(rest * factor)
-        x = p.copy()
-        ptr, verts, _, alpha, scale, lam, work = _vertical_chain(rest, inv_mass, np.zeros(m))
-        lam[:] = 7.0
-        solved = solve_chains(p, inv_mass, ptr, verts, rest, alpha, scale, lam, work, limit)
-        assert solved == 1
-        over = factor > 1 + limit
-        np.testing.assert_allclose(-np.diff(p[:, 2])[over], rest[over] * (1 + limit), rtol=1e-12)
-        for _ in range(20):  # the passes of xpbd_frame, until no chain is solved
-            if solve_chains(p, inv_mass, ptr, verts, rest, alpha, scale, lam, work, limit) == 0:
-                break
-        assert np.all(-np.diff(p[:, 2]) <= rest * (1 + 1.1 * limit) * (1 + 1e-12))
-        np.testing.assert_array_equal(lam, 7.0)
-        np.testing.assert_array_equal(p[:, :2], 0.0)
-        if inv_mass[0] == 0.0:
-            assert p[0, 2] == 0.0
-        if inv_mass[0] > 0.0:
-            mass = 1.0 / inv_mass
-            assert mass @ p[:, 2] == pytest.approx(mass @ x[:, 2], rel=1e-12)
-    p = np.zeros((m + 1, 3))
-    p[1:, 2] = -np.cumsum(rest * (1 + 1.05 * limit))  # over the limit, within the slack
-    before = p.copy()
-    assert solve_chains(p, inv_mass, ptr, verts, rest, alpha, scale, lam, work, limit) == 0
-    np.testing.assert_array_equal(p, before)
-
-
-def test_chain_of_springs_hangs_at_the_static_elongation():
-    """Implicit Euler by substeps (predict, one exact chain solve, v = dx/h) comes to rest
-    where each spring carries the weight below it: elongation_k = g sum_(i>k) m_i / k_k."""
-    rng = np.random.default_rng(2)
-    m, g, h = 10, 9.81, 0.01
-    rest = rng.uniform(0.05, 0.1, m)
-    k = rng.uniform(200.0, 2000.0, m)  # N/m
-    mass = rng.uniform(0.005, 0.02, m + 1)
-    inv_mass = np.r_[0.0, 1.0 / mass[1:]]  # vertex 0 pinned
-    args = _vertical_chain(rest, inv_mass, 1.0 / k / h**2)  # alpha~ = alpha / h^2
-    lam = args[5]
-    x = np.zeros((m + 1, 3))
-    x[1:, 2] = -np.cumsum(rest)
-    v = np.zeros_like(x)
-    for _ in range(1000):
-        v[1:, 2] -= h * g
-        p = x + h * v
-        lam[:] = 0.0
-        solve_chains(p, inv_mass, *args)
-        v, x = (p - x) / h, p
-    weight_below = g * np.cumsum(mass[::-1])[::-1][1:]
-    np.testing.assert_allclose(-np.diff(x[:, 2]), rest + weight_below / k, rtol=1e-9)
-    assert np.abs(v).max() < 1e-9
-
-
-def test_hinge_projection_follows_the_angle_gradient():
-    rng = np.random.default_rng(3)
-    x = np.array([[0, 0, 0], [0, 1, 0], [-1, 0.3, 0.1], [0.9, 0.6, 0.4]], float)
-    x += 0.05 * rng.normal(size=x.shape)
-    hinge = np.array([[0, 1, 2, 3]])
-    theta = dihedral_angles(x, hinge)[0]
-    eps = 1e-7
-    grad = np.zeros((4, 3))
-    for q in range(4):
-        for k in range(3):
-            y = x.copy()
-            y[q, k] += eps
-            grad[q, k] = (dihedral_angles(y, hinge)[0] - theta) / eps
-    inv_mass = np.array([1.0, 2.0, 0.5, 1.5])
-    rest = theta - 1e-3  # a small violation
-    p = x.copy()
-    project_hinge(p, inv_mass, 0, 1, 2, 3, rest, 0.0)
-    step = p - x
-    c = theta - rest
-    expected = -c * inv_mass[:, None] * grad / np.sum(inv_mass[:, None] * grad**2)
-    np.testing.assert_allclose(step, expected, rtol=1e-4, atol=1e-12)
-    assert abs(dihedral_angles(p, hinge)[0] - rest) < 1e-3 * c  # fixed to first order
-
-
-def test_fast_atan2_matches_libm():
-    rng = np.random.default_rng(0)
-    y, x = rng.normal(size=(2, 2000))
-    got = np.array([fast_atan2(a, b) for a, b in zip(y, x, strict=True)])
-    np.testing.assert_allclose(got, np.arctan2(y, x), atol=3e-8)
-    assert fast_atan2(0.0, -1.0) == pytest.approx(np.pi) and fast_atan2(0.0, 0.0) == 0.0
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(("cells", "rows", "bend_every"), [(10, 5, 1), (5, 3, 2)])
 def test_cantilever_sag_matches_the_hinge_chain_statics(cells, rows, bend_every):
@@ -230,10 +104,9 @@ def test_cantilever_sag_matches_the_hinge_chain_statics(cells, rows, bend_every)
     cfg = ClothConfig()
     cfg.substeps = 512
     solver = XPBDCloth(model, (), cfg)
-    solver.substep_constants(DT)
-    assert solver.bend_every == bend_every
+    assert solver.frame_constants(DT).bend_every == bend_every
     # thick still air settles the strip (drag vanishes at rest, so the statics are untouched)
-    state, energy = _run(solver, model, 600, air=AeroParams(drag_coefficient=20.0))
+    state, energy = _run(solver, model, 600, air=AeroConfig(drag_coefficient=20.0))
     hu = length / cells
     column_mass = np.full(cells + 1, rho * width * hu)
     column_mass[-1] /= 2
@@ -280,7 +153,8 @@ def test_bounding_box_broad_phase_changes_no_bit():
     model = _cloth(n=14, size=0.6, origin=(-0.3, -0.3, 0.3))
     culled = XPBDCloth(model, bodies, ClothConfig())
     every = XPBDCloth(model, bodies, ClothConfig())
-    every.body_boxes = np.tile([-np.inf, -np.inf, -np.inf, np.inf, np.inf, np.inf], (2, 1))
+    everywhere = np.tile([-np.inf, -np.inf, -np.inf, np.inf, np.inf, np.inf], (2, 1))
+    every.tables = every.tables._replace(contacts=every.tables.contacts._replace(boxes=everywhere))
     a, _ = _run(culled, model, 40, air=True)
     b, _ = _run(every, model, 40, air=True)
     assert np.array_equal(a.positions, b.positions) and np.array_equal(a.velocities, b.velocities)
@@ -288,7 +162,7 @@ def test_bounding_box_broad_phase_changes_no_bit():
     rng = np.random.default_rng(1)
     pts = np.concatenate([a.positions, rng.uniform(-0.4, 0.4, (200, 3))])
     depth = np.maximum(0.0, -distances(bodies, pts)[0]).max()
-    kinds, params, boxes = culled.body_kinds, culled.body_params, culled.body_boxes
+    kinds, params, boxes, _, _ = culled.tables.contacts
     assert depth > 0.01 and max_penetration(kinds, params, boxes, pts) == depth
     e = culled.topology.edges[culled.stretch_edges]
     stretch = np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1)
@@ -313,7 +187,8 @@ def test_energy_bound_is_the_work_done_on_the_cloth():
     cfg = ClothConfig()
     solver = XPBDCloth(model, (), cfg)
     state, energy = _run(solver, model, 60)
-    assert energy.max() <= solver.work_in  # gravity's work bounds the kinetic energy
+    assert energy.max() <= state.work_in  # gravity's work bounds the kinetic energy
+    assert state.frames == 60
     cfg.energy_limit = 1e-3  # a bound below what any falling cloth reaches
     strict = XPBDCloth(model, (), cfg)
     with pytest.raises(SimulationDiverged, match="kinetic energy"):
@@ -343,9 +218,10 @@ def test_bad_solver_settings_name_their_key(change, key):
     cfg = ClothConfig()
     for k, v in change.items():
         setattr(cfg, k, v)
-    with pytest.raises(ConfigError) as err:
-        make_cloth_solver(cfg, _cloth(n=4), ())
-    assert err.value.key == key
+    for build in (check_cloth_solver, lambda c, m: make_cloth_solver(c, m, ())):
+        with pytest.raises(ConfigError) as err:
+            build(cfg, _cloth(n=4))  # check_cloth_solver: what prepare() calls
+        assert err.value.key == key
 
 
 @pytest.mark.parametrize(
@@ -358,9 +234,10 @@ def test_bad_solver_settings_name_their_key(change, key):
     ],
 )
 def test_bad_material_names_its_key(material, key):
-    with pytest.raises(ConfigError) as err:
-        XPBDCloth(_cloth(n=4, **material), (), ClothConfig())
-    assert err.value.key == key
+    for build in (XPBDCloth.check, lambda m, c: XPBDCloth(m, (), c)):
+        with pytest.raises(ConfigError) as err:
+            build(_cloth(n=4, **material), ClothConfig())
+        assert err.value.key == key
 
 
 @pytest.mark.parametrize(
@@ -378,7 +255,6 @@ def test_soft_bending_is_projected_every_other_substep_only_when_resolved(
     cfg = ClothConfig()
     cfg.substeps = substeps
     solver = XPBDCloth(model, (), cfg)
-    solver.substep_constants(DT)
-    assert solver.bend_every == expected
+    assert solver.frame_constants(DT).bend_every == expected
     first = solver.step(model.initial_state(), np.zeros((model.n_vertices, 3)), DT)
     assert np.isfinite(first.positions).all()

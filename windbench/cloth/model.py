@@ -77,8 +77,14 @@ class ClothModel:
 
 @dataclass(frozen=True)
 class ClothState:
+    """What a solver's step takes and returns: vertex positions and velocities ``(n, 3)``,
+    the frames advanced so far and the positive work done on the cloth by gravity and the
+    external forces (J), which bounds its kinetic energy."""
+
     positions: np.ndarray
     velocities: np.ndarray
+    frames: int = 0
+    work_in: float = 0.0
 
 
 class StaticCloth:
@@ -87,6 +93,10 @@ class StaticCloth:
     ``cloth.solver=static``: for runs that want the wind alone with a fixed cloth obstacle
     (the default solver is ``xpbd``, :mod:`windbench.cloth.solver`).
     """
+
+    @classmethod
+    def check(cls, model: ClothModel, params) -> None:
+        """Nothing to check: the static cloth reads no ``cloth.*`` value."""
 
     def __init__(self, model: ClothModel, bodies, params):
         self.model = model

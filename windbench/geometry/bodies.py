@@ -102,8 +102,8 @@ def body_from_config(spec: Mapping, key: str) -> Body:
     return Body(
         kind,
         tuple(float(v) for v in row),
-        str(spec.get("name", "")),
-        bool(spec.get("resolve", True)),
+        str(spec.get("name", Body.name)),
+        bool(spec.get("resolve", Body.resolve)),
     )
 
 

@@ -581,35 +581,7 @@ def fig6_shirt(records: Sequence[RunRecord]) -> Drawn | Missing:
             ax.set_title(f"{wind}: {label}", fontsize=9)
             cloth_axes.append(ax)
         ax = fig.add_subplot(grid[2, c])
-        im = ax.imshow(
-            fr.speed[-1].T,
-            origin="lower",
-            extent=fr.extent,
-            vmin=0,
-            vmax=u_max,
-            cmap=SPEED_CMAP,
-            interpolation="nearest",
-        )
-        ax.imshow(_not_arrived(fr, -1, direction), origin="lower", extent=fr.extent)
-        _draw_bodies_xy(ax, scene, fr.slice_z)
-        ring = np.abs(fr.positions[-1][:, 2] - fr.slice_z) < 0.5 * fr.h
-        ax.plot(fr.positions[-1][ring, 0], fr.positions[-1][ring, 1], ".", color="tab:red", ms=1)
-        ax.set_xlim(lo[0] - 0.4, hi[0] + 0.6)
-        ax.set_ylim(lo[1] - 0.3, hi[1] + 0.3)
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_title(f"{wind}: |u| at z = {fr.slice_z:.3g} m", fontsize=9)
-        ax.annotate(
-            "wind",
-            (0.26, 0.93),
-            xytext=(0.04, 0.93),
-            xycoords="axes fraction",
-            arrowprops={"arrowstyle": "->", "color": "w"},
-            color="w",
-            va="center",
-            fontsize=8,
-        )
+        im = _chest_slice(ax, wind, fr, scene, direction, (lo, hi), u_max)
         slice_axes.append(ax)
         sides.append((wind, *shirt_pressure(fr, direction)))
     fig.colorbar(
@@ -644,6 +616,42 @@ def fig6_shirt(records: Sequence[RunRecord]) -> Drawn | Missing:
             f"`wind={w}`" for w in sorted(missing)
         )
     return Drawn("fig6_shirt", title, caption + ".", fig)
+
+
+def _chest_slice(ax, wind, fr, scene, direction, box, u_max):
+    """Fig. 6's bottom row: wind speed in the slice through the chest, the body, the shirt
+    vertices near the slice and where the wind has not arrived; returns the image."""
+    lo, hi = box
+    im = ax.imshow(
+        fr.speed[-1].T,
+        origin="lower",
+        extent=fr.extent,
+        vmin=0,
+        vmax=u_max,
+        cmap=SPEED_CMAP,
+        interpolation="nearest",
+    )
+    ax.imshow(_not_arrived(fr, -1, direction), origin="lower", extent=fr.extent)
+    _draw_bodies_xy(ax, scene, fr.slice_z)
+    ring = np.abs(fr.positions[-1][:, 2] - fr.slice_z) < 0.5 * fr.h
+    ax.plot(fr.positions[-1][ring, 0], fr.positions[-1][ring, 1], ".", color="tab:red", ms=1)
+    ax.set_xlim(lo[0] - 0.4, hi[0] + 0.6)
+    ax.set_ylim(lo[1] - 0.3, hi[1] + 0.3)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{wind}: |u| at z = {fr.slice_z:.3g} m", fontsize=9)
+    ax.annotate(
+        "wind",
+        (0.26, 0.93),
+        xytext=(0.04, 0.93),
+        xycoords="axes fraction",
+        arrowprops={"arrowstyle": "->", "color": "w"},
+        color="w",
+        va="center",
+        fontsize=8,
+    )
+    return im
 
 
 def _mappable(norm, cmap):

@@ -184,11 +184,11 @@ def primitive_from_config(spec: Mapping, key: str) -> Primitive:
             profile=_profile(spec.get("profile"), f"{key}.profile"),
             turbulence=_turbulence(spec.get("turbulence"), f"{key}.turbulence"),
         )
-    strength = float(spec.get("strength", 0.0))
-    core = float(spec.get("core_radius", 0.0))
+    strength = float(spec.get("strength", Primitive.strength))
+    core = float(spec.get("core_radius", Primitive.core_radius))
     if core < 0:
         raise ConfigError(f"{key}.core_radius", f"must be >= 0, got {core}")
-    axis = _vec3(spec, "axis", key, (0.0, 0.0, 1.0))
+    axis = _vec3(spec, "axis", key, Primitive.axis)
     if np.linalg.norm(axis) == 0:
         raise ConfigError(f"{key}.axis", "must be a non-zero vector")
     return Primitive(

@@ -118,6 +118,7 @@ def test_auto_rate_keeps_every_inflow_cell_marked():
 def test_bad_emission_settings_name_the_key(source_extra, key):
     scene = scene_of([{"type": "uniform", "velocity": [1.0, 0, 0], **source_extra}])
     grid = Grid.from_domain(scene.lower, scene.upper, 8)
-    with pytest.raises(ConfigError) as err:
-        ParticleWind(scene, grid, params())
-    assert err.value.key == key
+    for build in (ParticleWind.check, ParticleWind):  # check: what prepare() calls
+        with pytest.raises(ConfigError) as err:
+            build(scene, grid, params())
+        assert err.value.key == key

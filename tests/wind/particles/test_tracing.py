@@ -16,7 +16,13 @@ from windbench.grid import Grid
 from windbench.scenes import build_scene
 from windbench.wind.base import Obstacles
 from windbench.wind.particles import ParticleWind
-from windbench.wind.particles.tracing import TRIANGLES, convex_first_hit, sort_by_cell
+from windbench.wind.particles.tracing import (
+    TRIANGLES,
+    CellGrid,
+    Particles,
+    convex_first_hit,
+    sort_by_cell,
+)
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +34,7 @@ def hit(kind, prm, a, b):
     n = np.zeros(3)
     a, b = np.asarray(a, float), np.asarray(b, float)
     e = b - a
-    s = convex_first_hit(kind, np.asarray(prm, float), *a, *e, np.empty((2, 3)), n)
+    s = convex_first_hit(kind, np.asarray(prm, float), tuple(a), tuple(e), np.empty((2, 3)), n)
     return s, n
 
 
@@ -252,7 +258,7 @@ def test_a_moved_cloth_no_longer_blocks_its_old_cells(particle_params):
     wind.step(1.5, Obstacles((), moved, np.zeros_like(moved), tris))
     np.testing.assert_allclose(wind.particles[0][0], [2.5, 0.7, 0.3], atol=1e-12)  # free
     # the cells flagged are exactly those the grid-wide registration gives the moved sheet
-    flagged = (wind._flags & TRIANGLES).astype(bool).reshape(grid.shape)
+    flagged = (wind.state.cells.flags & TRIANGLES).astype(bool).reshape(grid.shape)
     np.testing.assert_array_equal(
         flagged, occupied_cells(triangle_cells(moved, tris, grid)[0], grid.shape)
     )
@@ -270,7 +276,8 @@ def test_sort_by_cell_is_a_stable_sort_by_cell_id():
     idx = np.floor((pos[:n] - lower) / h).astype(int)
     order = np.argsort((idx[:, 0] * 30 + idx[:, 1]) * 20 + idx[:, 2], kind="stable")
     expected = pos[order], src[order], ages[order], pos[n:].copy()
-    sort_by_cell(n, lower, h, shape, pos, src, ages)
+    grid = CellGrid(tuple(lower), tuple(lower + h * shape), h, tuple(int(m) for m in shape))
+    sort_by_cell(grid, n, Particles(pos, src, ages))
     np.testing.assert_array_equal(pos[:n], expected[0])
     np.testing.assert_array_equal(src[:n], expected[1])
     np.testing.assert_array_equal(ages[:n], expected[2])

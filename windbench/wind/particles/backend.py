@@ -3,73 +3,41 @@
 "In our model every wind source is also a particle source: these particles form an
 uncoupled particle system which can be considered as a wind gust." Each step:
 
-1. **Emission** (:mod:`windbench.wind.particles.emission`): every source emits its own particles over
-   its region, at its rate, during its gust intervals; a particle emitted at instant t_e
-   within the step is advanced only by the rest of the step.
-2. **Tracing** (:mod:`windbench.wind.particles.tracing`): a particle of source i moves in w_i alone
-   (explicit Euler, p += w_i(p) dt); its path is cut at every cell face, and every cell a
-   piece crosses is marked as reached by source i at this time.
+1. **Emission** (:mod:`.emission`): every source emits its own particles over its region,
+   at its rate, during its gust intervals; a particle emitted at instant t_e within the
+   step is advanced only by the rest of the step.
+2. **Tracing** (:mod:`.tracing`): a particle of source i moves in w_i alone (explicit
+   Euler, ``p_{t+dt} = p_t + w_i(p_t) dt``); its path is cut at every cell face, and every
+   cell a piece crosses is marked as reached by source i at this time.
 3. **Lee**: each piece is tested against the rigid bodies and the current cloth triangles
    registered in its cell; at a hit the particle stops on the surface and keeps only the
-   tangential part w - (n . w) n of its velocity, so it slides along and never crosses.
-4. **Field**: u(cell) = sum of w_i(cell) over the sources whose particles reached the cell
-   within the last ``wind.memory`` seconds; cells no particle reached hold zero, and so do
-   cells whose centre lies inside a rigid body. ``sample()`` interpolates u trilinearly.
+   tangential part ``w_i - (n_obj . w_i) n_obj`` of its velocity.
+4. **Field**: ``u = sum w_i`` per cell over the sources whose particles reached it within
+   the last ``wind.memory`` seconds; cells no particle reached, and cells whose centre
+   lies inside a rigid body, hold zero. ``sample()`` interpolates u trilinearly.
 
-Choices the paper leaves open (written down here):
+Choices the paper leaves open: a free particle leaves w_i at the cell *centre*, so with
+no obstacles u equals the ``global`` backend's field wherever every source has arrived;
+``wind.deflected_cells`` says which hits make a particle's later marks carry the
+tangential w_i (``bodies``, the default, keeps the paper's no-flow-through condition at
+walls and lets a cloth feel the wind that arrives at it; ``all`` applies it at every
+object, ``none`` nowhere); a head-on hit (no tangential part left) ends the particle;
+particles leave through every domain face (boundary kinds do not steer them); cloth
+triangles are obstacles at their current positions (the paper's static collision test).
 
-- *Value of a reached cell.* A free particle of source i leaves w_i evaluated at the cell
-  centre (not at the particle), so with no obstacles u equals the ``global`` backend's
-  field exactly wherever every source has arrived, and the result does not depend on
-  which particle came last.
-- *Cells after a hit* (``wind.deflected_cells``). A particle that has hit an object slides
-  on with w - (n . w) n in every case; the marks it leaves afterwards in that step carry
-  w_i(centre) with the contact normals projected out (a deflected mark, overriding free
-  marks of the same step) for hits on rigid bodies (``bodies``, the default), on bodies
-  and cloth (``all``: the paper's u(p_col) . n_obj = 0 at every object) or never
-  (``none``). The default keeps the paper's no-flow-through condition at walls but lets
-  a cloth feel the wind that arrives at it: with ``all``, the cells a cloth sits in hold
-  only the tangential wind, and the §3 drag on an exposed cloth collapses (|F| on
-  ``scene=flag`` with ``cloth.solver=static`` after 1.5 s: 3.8 N with ``all``, 22.3 N
-  with ``bodies``, 22.7 N with ``none``, 24.6 N from the ``global`` backend). The lee
-  behind the cloth is the same in all three modes: no particle crosses it.
-- *Head-on hits.* A particle whose velocity has no tangential part left after a hit
-  (w parallel to n) is removed: its gust has stagnated at the wall. It still marks the
-  cell where it stopped (with zero where ``deflected_cells`` makes that hit count).
-- *Sinks* emit on the whole domain boundary; their particles gather at the centre (where
-  w_i vanishes inside the core) until ``max_age``.
-- *Order and cost.* Tracing runs serially over the particles in their stored order (so
-  the "later mark wins" rule is deterministic); every ``SORT_EVERY`` steps the particles
-  are reordered by cell (stable O(n) radix sort) so that the walk through the cell
-  arrays is sequential in memory. Cost per step: O(particles x cells crossed) for
-  emission, tracing, collision tests (only what is registered in each crossed cell,
-  found through per-cell flags; cloth triangles registered in O(overlaps)) and the field
-  update (u is refreshed in the cells whose marks change and in those whose marks lapse
-  ``memory`` later); nothing per step is O(cells). On grids of ``PREFETCH_CELLS`` cells
-  and more, with fewer particles than half the cells, the tracing prefetches the cell
-  state a few particles ahead. Measured
-  figures: ``experiments/README.md`` (``scaling_particles``, ``bench_particles.py``).
-- *Domain faces.* Particles leave through every face and die (the field outside the grid
-  is not kept); boundary kinds (slip, periodic, ...) do not steer them.
-- *Thin poles* (``resolve: false``) are obstacles like other bodies.
-- *Obstacle motion.* Cloth triangles are registered at their current positions each step;
-  a particle does not inherit their velocity (the paper's static collision test). With
-  ``memory`` of a few steps the lee follows moving cloth.
-
-Config (``conf/wind/particles.yaml``, schema :class:`ParticleConfig`):
-``particles_per_second`` (per source; null: automatic, see emission), ``particles_per_cell``,
-``max_particles`` (live particles are capped: emission beyond it is dropped),
-``max_age`` (s), ``memory`` (s), ``max_hits`` (collisions per particle per step),
-``deflected_cells`` (``all``, ``bodies`` or ``none``, see above),
-``seed`` (``${seed}``). Per-source ``emit`` / ``gusts`` keys: see
-:mod:`windbench.wind.particles.emission`.
+:class:`ParticleWind` keeps the model (:class:`~.tracing.GustModel` tables, emitters,
+fixed at construction) apart from the :class:`ParticleState` that :func:`advance` takes
+and returns and from the :class:`Workspace` of scratch it reuses. Tracing runs serially
+in the particles' stored order, so the "later mark wins" rule is deterministic; every
+``SORT_EVERY`` steps the particles are reordered by cell so that the walk through the cell
+arrays is sequential in memory. Config: ``conf/wind/particles.yaml``, schema
+:class:`ParticleConfig`; per-source ``emit`` / ``gusts`` keys: :mod:`.emission`.
 """
 
 from __future__ import annotations
 
 import time
-from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -77,12 +45,22 @@ from windbench.errors import ConfigError
 from windbench.geometry.bodies import body_table
 from windbench.geometry.raster import triangle_cell_pairs
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.particles.emission import emitters_from_scene
+from windbench.wind.particles.emission import Emitter, emission_specs, emitters_from_scene
 from windbench.wind.particles.tracing import (
     BODIES,
     MARK_MODES,
     SOLID,
+    BodyCells,
+    CellGrid,
+    CellState,
+    ClothCells,
+    GustModel,
+    Particles,
+    TraceRules,
+    TraceStep,
+    TraceWork,
     admit_particles,
+    euler_velocities,
     expire_cells,
     reached_sources,
     register_bodies,
@@ -138,6 +116,224 @@ def _check(params) -> None:
             raise ConfigError(f"wind.{key}", f"must be {allowed}, got {getattr(params, key)}")
 
 
+@dataclass(frozen=True)
+class ParticleModel:
+    """What a run fixes: the kernels' tables, the emitters and the limits."""
+
+    tables: GustModel
+    emitters: tuple[Emitter, ...]
+    capacity: int  # live particles at most
+    n_cells: int
+    big_grid: bool  # prefetch the cells ahead while particles are sparse
+
+
+def particle_model(scene, grid, params) -> ParticleModel:
+    """Check the ``wind.*`` values and build the model of ``scene`` on ``grid``."""
+    _check(params)
+    source_kinds, source_params = parameter_table(scene.sources)
+    body_kinds, body_params = body_table(scene.bodies)
+    cells = CellGrid(
+        tuple(float(x) for x in grid.lower),
+        tuple(float(x) for x in grid.upper),
+        float(grid.h),
+        tuple(int(n) for n in grid.shape),
+    )
+    start, items = register_bodies(body_kinds, body_params, cells)
+    rules = TraceRules(
+        max_age=float(params.max_age),
+        memory=float(params.memory),
+        delta=CONTACT_OFFSET * float(grid.h),
+        max_hits=int(params.max_hits),
+        mark_mode=MARK_MODES[params.deflected_cells],
+    )
+    tables = GustModel(
+        cells, source_kinds, source_params, BodyCells(body_kinds, body_params, start, items), rules
+    )
+    return ParticleModel(
+        tables=tables,
+        emitters=emitters_from_scene(scene, grid, params, int(params.seed)),
+        capacity=int(params.max_particles),
+        n_cells=grid.n_cells,
+        big_grid=grid.n_cells >= PREFETCH_CELLS,
+    )
+
+
+@dataclass(frozen=True)
+class ParticleState:
+    """What changes: the live particles 0..n-1 of buffers grown on demand, the per-cell
+    marks, values and u (:class:`~.tracing.CellState`), the cells the cloth flagged last
+    step, the emission counters and the cells marked in each of the last steps (their
+    marks lapse ``memory`` later). The arrays are large and the kernels update them in
+    place; :func:`advance` returns the state with the rest replaced."""
+
+    time: float
+    steps: int
+    n: int
+    particles: Particles
+    cells: CellState
+    cloth_cells: np.ndarray  # cells with the TRIANGLES flag
+    carry: np.ndarray  # (n_sources,) fraction of a particle carried to the next step
+    counter: np.ndarray  # (n_sources,) particles emitted so far
+    history: tuple[tuple[float, np.ndarray], ...]
+
+
+def initial_state(model: ParticleModel, solid: np.ndarray) -> ParticleState:
+    """No particles, no marks; ``solid`` (n_cells,) the cells whose centre is in a body."""
+    n_sources = model.tables.source_kinds.shape[0]
+    marked = np.full((model.n_cells, max(n_sources, 1)), -np.inf)
+    u = np.zeros((model.n_cells, 3))
+    # with one source the values are u itself (u = the value while it is reached)
+    values = u.reshape(model.n_cells, 1, 3) if n_sources == 1 else np.zeros((*marked.shape, 3))
+    flags = np.zeros(model.n_cells, dtype=np.uint8)
+    flags[solid] |= SOLID
+    flags[np.diff(model.tables.bodies.start) > 0] |= BODIES
+    empty = Particles(np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0))
+    return ParticleState(
+        time=0.0,
+        steps=0,
+        n=0,
+        particles=empty,
+        cells=CellState(flags, marked, values, u),
+        cloth_cells=np.zeros(0, dtype=np.int64),
+        carry=np.zeros(n_sources),
+        counter=np.zeros(n_sources, dtype=np.int64),
+        history=(),
+    )
+
+
+@dataclass
+class Workspace:
+    """Scratch reused from step to step; it carries nothing the numbers depend on."""
+
+    trace: TraceWork  # the tracing kernel's scratch (velocities grown with the particles)
+    touched: np.ndarray = field(default_factory=lambda: np.zeros(1024, dtype=np.int64))
+    tri_slot: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    blocks: dict = field(default_factory=dict)  # each source's current random sample block
+
+    @classmethod
+    def for_model(cls, model: ParticleModel) -> Workspace:
+        vectors = (np.empty(3) for _ in range(3))
+        max_hits = model.tables.rules.max_hits
+        pairs = (np.empty((2, 3)), np.empty((2, 3)), np.empty((max_hits, 3)))
+        return cls(TraceWork(np.empty((0, 3)), *vectors, *pairs))
+
+    def velocities(self, n: int) -> TraceWork:
+        """The tracing scratch with room for the Euler velocities of n particles."""
+        if len(self.trace.velocities) < n:
+            size = max(n, 2 * len(self.trace.velocities), 1024)
+            self.trace = self.trace._replace(velocities=np.empty((size, 3)))
+        return self.trace
+
+
+def reserve(particles: Particles, n: int, k: int) -> Particles:
+    """Buffers (doubled when grown) that hold k more particles after the n live ones."""
+    if n + k <= len(particles.positions):
+        return particles
+    size = max(n + k, 2 * len(particles.positions), 1024)
+    grown = []
+    for old in particles:
+        new = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
+        new[:n] = old[:n]
+        grown.append(new)
+    return Particles(*grown)
+
+
+def emit(model: ParticleModel, state: ParticleState, work: Workspace, t1: float):
+    """Append every source's new particles of [state.time, t1) to the state.
+
+    Returns (state, their durations in the step, candidates dropped): candidates outside
+    the grid's half-open box or inside a rigid body are dropped, and so is what exceeds
+    ``max_particles``.
+    """
+    t0 = state.time
+    pos, src, dur = [], [], []
+    for e in model.emitters:
+        block = work.blocks.setdefault(e.source, {})
+        p, instants, state.carry[e.source], state.counter[e.source] = e.emit(
+            t0, t1, state.carry[e.source], int(state.counter[e.source]), block
+        )
+        pos.append(p)
+        src.append(np.full(len(p), e.source, dtype=np.int64))
+        dur.append(t1 - instants)
+    if not pos:
+        return state, np.zeros(0), 0
+    if len(pos) > 1:
+        pos, src, dur = np.concatenate(pos), np.concatenate(src), np.concatenate(dur)
+    else:
+        pos, src, dur = pos[0], src[0], dur[0]
+    particles = reserve(state.particles, state.n, len(pos))
+    durations = np.empty(len(pos))
+    room = max(model.capacity - state.n, 0)
+    m = admit_particles((pos, src, dur), model.tables, room, state.n, particles, durations)
+    return replace(state, n=state.n + m, particles=particles), durations[:m], len(pos) - m
+
+
+def register_cloth_cells(model, state, work, obstacles: Obstacles):
+    """Flag the cells the cloth triangles overlap now; (state, :class:`ClothCells`)."""
+    positions = np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64)
+    triangles = np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64)
+    m = triangles.shape[0]
+    if m == 0 and len(state.cloth_cells) == 0:
+        empty = (np.zeros((0, 2, 3)), work.tri_slot, np.zeros(1, np.int64), np.zeros(0, np.int64))
+        return state, ClothCells(positions, triangles, *empty)
+    if len(work.tri_slot) == 0:
+        work.tri_slot = np.zeros(model.n_cells, dtype=np.int64)
+    g = model.tables.grid
+    lower, shape = np.asarray(g.lower), np.asarray(g.shape, dtype=np.int64)
+    keys = triangle_cell_pairs(positions, triangles, lower, g.h, shape)
+    flagged, start, items = register_cloth(
+        keys, max(m, 1), state.cloth_cells, state.cells.flags, work.tri_slot
+    )
+    corners = positions[triangles]  # (m, 3 corners, 3)
+    bounds = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
+    cloth = ClothCells(positions, triangles, bounds, work.tri_slot, start, items)
+    return replace(state, cloth_cells=flagged), cloth
+
+
+def expire(model: ParticleModel, state: ParticleState, touched: np.ndarray) -> ParticleState:
+    """Keep this step's marked cells; refresh u where marks older than memory lapse."""
+    memory = model.tables.rules.memory
+    history = (*state.history, (state.time, touched))
+    while history and state.time - history[0][0] > memory * (1 + 1e-12) + 1e-12:
+        t_mark, cells = history[0]
+        expire_cells(cells, t_mark, state.cells, state.time, memory)
+        history = history[1:]
+    return replace(state, history=history)
+
+
+def advance(model, state, work, dt: float, obstacles: Obstacles):
+    """One step of length dt (module docstring, steps 1-4): (next state, figures)."""
+    t0 = time.perf_counter()
+    n_old, t_end = state.n, state.time + dt
+    state, new_durations, dropped = emit(model, state, work, t_end)
+    t1 = time.perf_counter()
+    state, cloth = register_cloth_cells(model, state, work, obstacles)
+    sparse = model.big_grid and state.n < PREFETCH_DENSITY * model.n_cells
+    step = TraceStep(dt, t_end, state.n, n_old, new_durations, sparse)
+    trace_work = work.velocities(state.n)
+    euler_velocities(model.tables, state.particles, state.n, trace_work.velocities)
+    work.touched, n_touched, crossings, n_alive = trace_gusts(
+        model.tables, cloth, state.cells, state.particles, step, trace_work, work.touched
+    )
+    t2 = time.perf_counter()
+    state = replace(state, n=n_alive, steps=state.steps + 1, time=t_end)
+    if state.steps % SORT_EVERY == 0:
+        sort_by_cell(model.tables.grid, state.n, state.particles)
+    state = expire(model, state, work.touched[:n_touched].copy())
+    t3 = time.perf_counter()
+    figures = {
+        "dropped_particles": float(dropped),
+        "live_particles": float(state.n),
+        "emitted_particles": float(len(new_durations)),
+        "cell_crossings": float(crossings),
+        "particle_steps_per_second": step.n / (t2 - t1) if t2 > t1 else 0.0,
+        "emit_seconds": t1 - t0,
+        "trace_seconds": t2 - t1,
+        "assemble_seconds": t3 - t2,
+    }
+    return state, figures
+
+
 @register_backend("particles", config=ParticleConfig)
 class ParticleWind(WindField):
     """Gust particles per source; u = sum of the reached sources' w_i (module docstring)."""
@@ -154,7 +350,7 @@ class ParticleWind(WindField):
     def check(cls, scene, grid, params) -> None:
         """Raise ConfigError for bad ``wind.*`` values or source ``emit``/``gusts`` keys."""
         _check(params)
-        emitters_from_scene(scene, grid, params, int(params.seed))
+        emission_specs(scene)
 
     @classmethod
     def memory(cls, scene, grid, params, dt) -> dict[str, tuple[float, str]]:
@@ -180,228 +376,32 @@ class ParticleWind(WindField):
 
     def __init__(self, scene, grid, params):
         super().__init__(scene, grid, params)
-        _check(params)
-        self.emitters = emitters_from_scene(scene, grid, params, int(params.seed))
-        # model: fixed tables for the kernels, parameters read once
-        self._kinds, self._prims = parameter_table(scene.sources)
-        self._body_kinds, self._body_params = body_table(scene.bodies)
-        self._lower = np.asarray(grid.lower, dtype=np.float64)
-        self._upper = np.asarray(grid.upper, dtype=np.float64)
-        self._shape = np.asarray(grid.shape, dtype=np.int64)
-        self._h = float(grid.h)
-        self._body_start, self._body_items = register_bodies(
-            self._body_kinds, self._body_params, self._lower, self._h, self._shape
-        )
-        self._capacity = int(params.max_particles)
-        self._memory = float(params.memory)
-        self._max_age = float(params.max_age)
-        self._max_hits = int(params.max_hits)
-        self._mark_mode = MARK_MODES[params.deflected_cells]
-        self._big_grid = grid.n_cells >= PREFETCH_CELLS  # and particles sparse: prefetch
-        # state
-        n_sources = len(scene.sources)
-        self.time = 0.0
-        self._steps = 0
-        # particles 0.._n-1 of buffers grown on demand: position, source id, age
-        self._n = 0
-        self._pos = np.zeros((0, 3))
-        self._src = np.zeros(0, dtype=np.int64)
-        self._age = np.zeros(0)
-        self._carry = np.zeros(n_sources)
-        self._counter = np.zeros(n_sources, dtype=np.int64)
-        self._blocks = [{} for _ in range(n_sources)]  # each source's current sample block
-        # per (cell, source): time of the last mark (-inf: never) and the value it left;
-        # with one source the values are u itself (u = the value while it is reached)
-        self._marked = np.full((grid.n_cells, max(n_sources, 1)), -np.inf)
-        self._u = np.zeros((grid.n_cells, 3))
-        if n_sources == 1:
-            self._values = self._u.reshape(grid.n_cells, 1, 3)
-        else:
-            self._values = np.zeros((grid.n_cells, max(n_sources, 1), 3))
-        # per cell: SOLID (centre in a body), BODIES (bodies registered), TRIANGLES (cloth)
-        self._flags = np.zeros(grid.n_cells, dtype=np.uint8)
-        self._flags[self.solid_mask().reshape(-1)] |= SOLID
-        self._flags[np.diff(self._body_start) > 0] |= BODIES
-        self._tri_slot = np.zeros(0, dtype=np.int64)  # grown to n_cells with the first cloth
-        self._tri_cells = np.zeros(0, dtype=np.int64)  # cells flagged TRIANGLES
-        self._no_triangles = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 2, 3)))
-        self._touched = np.zeros(1024, dtype=np.int64)
-        self._history: deque[tuple[float, np.ndarray]] = deque()
+        self.model = particle_model(scene, grid, params)
+        self.state = initial_state(self.model, self.solid_mask().reshape(-1))
+        self.workspace = Workspace.for_model(self.model)
         self._stats: dict[str, float] = {}
 
-    # ---------------------------------------------------------------- emission
-    def _emit(self, t0: float, t1: float) -> np.ndarray:
-        """Append the new particles of all sources in [t0, t1); their durations in the step.
+    @property
+    def time(self) -> float:
+        return self.state.time
 
-        Candidates outside the grid's half-open box or inside a rigid body are dropped, and
-        so is what exceeds ``max_particles``.
-        """
-        pos, src, dur = [], [], []
-        for e in self.emitters:
-            p, instants, carry, counter = e.emit(
-                t0, t1, self._carry[e.source], int(self._counter[e.source]), self._blocks[e.source]
-            )
-            self._carry[e.source], self._counter[e.source] = carry, counter
-            pos.append(p)
-            src.append(np.full(len(p), e.source, dtype=np.int64))
-            dur.append(t1 - instants)
-        if not pos:
-            self._stats["dropped_particles"] = 0.0
-            return np.zeros(0)
-        if len(pos) > 1:
-            pos, src, dur = np.concatenate(pos), np.concatenate(src), np.concatenate(dur)
-        else:
-            pos, src, dur = pos[0], src[0], dur[0]
-        self._reserve(len(pos))
-        durations = np.empty(len(pos))
-        m = admit_particles(
-            pos,
-            src,
-            dur,
-            self._lower,
-            self._upper,
-            self._body_kinds,
-            self._body_params,
-            max(self._capacity - self._n, 0),
-            self._n,
-            self._pos,
-            self._src,
-            self._age,
-            durations,
-        )
-        self._n += m
-        self._stats["dropped_particles"] = float(len(pos) - m)
-        return durations[:m]
-
-    def _reserve(self, k: int) -> None:
-        """Grow the particle buffers (doubling) so that k more fit after the live ones."""
-        n = self._n
-        if n + k > len(self._pos):
-            size = max(n + k, 2 * len(self._pos), 1024)
-            for name in ("_pos", "_src", "_age"):
-                old = getattr(self, name)
-                grown = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
-                grown[:n] = old[:n]
-                setattr(self, name, grown)
+    def step(self, dt: float, obstacles: Obstacles) -> None:
+        self.state, self._stats = advance(self.model, self.state, self.workspace, dt, obstacles)
 
     def add_particles(self, positions, sources):
         """Insert particles (tests, benchmarks); the next step traces them for its full dt."""
         positions = np.atleast_2d(np.asarray(positions, dtype=np.float64))
-        n, k = self._n, len(positions)
-        self._reserve(k)
-        self._pos[n : n + k] = positions
-        self._src[n : n + k] = np.asarray(sources, dtype=np.int64)
-        self._age[n : n + k] = 0.0
-        self._n = n + k
-
-    # ---------------------------------------------------------------- step
-    def step(self, dt: float, obstacles: Obstacles) -> None:
-        t0 = time.perf_counter()
-        t_start, t_end = self.time, self.time + dt
-        n_old = self._n
-        new_dur = self._emit(t_start, t_end)
-        t1 = time.perf_counter()
-        tri_slot, tri_start, tri_items, tri_bounds = self._register_cloth(obstacles)
-        n_traced = self._n
-        self._touched, n_touched, crossings, self._n = trace_gusts(
-            n_traced,
-            n_old,
-            dt,
-            new_dur,
-            self._max_age,
-            self._kinds,
-            self._prims,
-            self._lower,
-            self._h,
-            self._shape,
-            self._flags,
-            self._body_kinds,
-            self._body_params,
-            self._body_start,
-            self._body_items,
-            self._cloth_pos,
-            self._cloth_tris,
-            tri_bounds,
-            tri_slot,
-            tri_start,
-            tri_items,
-            t_end,
-            self._memory,
-            CONTACT_OFFSET * self._h,
-            self._max_hits,
-            self._mark_mode,
-            self._big_grid and n_traced < PREFETCH_DENSITY * self.grid.n_cells,
-            self._pos,
-            self._src,
-            self._age,
-            self._marked,
-            self._values,
-            self._u,
-            self._touched,
-        )
-        t2 = time.perf_counter()
-        self._steps += 1
-        if self._steps % SORT_EVERY == 0:
-            self._sort_by_cell()
-        self.time = t_end
-        self._expire(self._touched[:n_touched].copy())
-        t3 = time.perf_counter()
-        trace = t2 - t1
-        self._stats.update(
-            live_particles=float(self._n),
-            emitted_particles=float(len(new_dur)),
-            cell_crossings=float(crossings),
-            particle_steps_per_second=n_traced / trace if trace > 0 else 0.0,
-            emit_seconds=t1 - t0,
-            trace_seconds=trace,
-            assemble_seconds=t3 - t2,
-        )
-
-    def _register_cloth(self, obstacles: Obstacles):
-        """Flag the cells the cloth triangles overlap now: (slot, start, items, bounds)."""
-        self._cloth_pos = np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64)
-        self._cloth_tris = np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64)
-        m = self._cloth_tris.shape[0]
-        if m == 0 and len(self._tri_cells) == 0:
-            return self._tri_slot, *self._no_triangles
-        if len(self._tri_slot) == 0:
-            self._tri_slot = np.zeros(self.grid.n_cells, dtype=np.int64)
-        keys = triangle_cell_pairs(
-            self._cloth_pos, self._cloth_tris, self._lower, self._h, self._shape
-        )
-        self._tri_cells, start, items = register_cloth(
-            keys, max(m, 1), self._tri_cells, self._flags, self._tri_slot
-        )
-        corners = self._cloth_pos[self._cloth_tris]  # (m, 3 corners, 3)
-        bounds = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
-        return self._tri_slot, start, items, bounds
-
-    def _sort_by_cell(self) -> None:
-        """Reorder the particles by cell id (stable), so that tracing walks memory in order."""
-        sort_by_cell(self._n, self._lower, self._h, self._shape, self._pos, self._src, self._age)
-
-    def _expire(self, touched: np.ndarray) -> None:
-        """Keep this step's marked cells; refresh u where marks older than memory lapse."""
-        self._history.append((self.time, touched))
-        while (
-            self._history and self.time - self._history[0][0] > self._memory * (1 + 1e-12) + 1e-12
-        ):
-            t_mark, cells = self._history.popleft()
-            expire_cells(
-                cells,
-                t_mark,
-                self._marked,
-                self._values,
-                self._flags,
-                self.time,
-                self._memory,
-                self._u,
-            )
+        n, k = self.state.n, len(positions)
+        particles = reserve(self.state.particles, n, k)
+        particles.positions[n : n + k] = positions
+        particles.sources[n : n + k] = np.asarray(sources, dtype=np.int64)
+        particles.ages[n : n + k] = 0.0
+        self.state = replace(self.state, n=n + k, particles=particles)
 
     # ---------------------------------------------------------------- queries
     def velocity(self) -> np.ndarray:
         """u on the cells (read-only view of the backend's state)."""
-        u = self._u.reshape(*self.grid.shape, 3)
+        u = self.state.cells.u.reshape(*self.grid.shape, 3)
         u.flags.writeable = False
         return u
 
@@ -410,16 +410,17 @@ class ParticleWind(WindField):
 
     def reached(self) -> np.ndarray:
         """``(n_sources, nx, ny, nz)`` bool: cells each source reached within ``memory``."""
-        out = np.zeros(self._marked.shape, dtype=np.bool_)
-        reached_sources(self._marked, self.time, self._memory, out)
-        return out.T.reshape(self._marked.shape[1], *self.grid.shape)[: len(self.scene.sources)]
+        marked = self.state.cells.marked
+        out = np.zeros(marked.shape, dtype=np.bool_)
+        reached_sources(marked, self.state.time, self.model.tables.rules.memory, out)
+        return out.T.reshape(marked.shape[1], *self.grid.shape)[: len(self.scene.sources)]
 
     def ever_reached(self) -> np.ndarray:
         """``(nx, ny, nz)`` bool: cells any particle has marked since the start."""
-        return np.isfinite(self._marked).any(axis=1).reshape(self.grid.shape)
+        return np.isfinite(self.state.cells.marked).any(axis=1).reshape(self.grid.shape)
 
     @property
     def particles(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Live particles: positions ``(n, 3)``, source ids ``(n,)``, ages ``(n,)`` (copies)."""
-        n = self._n
-        return self._pos[:n].copy(), self._src[:n].copy(), self._age[:n].copy()
+        n = self.state.n
+        return tuple(buffer[:n].copy() for buffer in self.state.particles)

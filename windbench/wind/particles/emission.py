@@ -2,53 +2,36 @@
 
 "In our model every wind source is also a particle source ... The specific emission
 intervals and amounts depend on the properties of the flow sources." An :class:`Emitter`
-is the model of one source's emission; :func:`emitters_from_scene` builds one per scene
-source from the ``wind`` config and the source's optional ``emit`` / ``gusts`` keys.
+is the model of one source's emission, built by :func:`emitters_from_scene` from the
+``wind`` config and the source's checked ``emit`` / ``gusts`` keys (:func:`emission_spec`).
 
 Regions (the default per source kind; ``emit.box`` replaces it for any kind):
+``uniform``: the domain faces the wind blows in through (``U . n_out < 0``), each weighted
+by its flux ``|U . n| area``, so that the particle density is uniform in the volume;
+``source``: a sphere of radius ``emit.radius`` (default ``max(core_radius, h / 2)``);
+``sink``: all six domain faces, area-weighted; ``vortex``: a cylinder around its core
+line, radius ``emit.radius`` (default: out to the farthest domain corner), uniform in
+volume; ``emit.box`` ``{min: [x, y, z], max: [x, y, z]}``: uniform in the box (a box
+flat along one axis is a rectangle, e.g. a nozzle).
 
-============ ==============================================================================
-``uniform``  the domain faces the wind blows in through (``U . n_out < 0``), each weighted
-             by its flux ``|U . n| * area``, so that the particle density is uniform in the
-             volume. For ``U = (6, 0, 0)`` that is the ``x_min`` face alone.
-``source``   a sphere of radius ``emit.radius`` (default ``max(core_radius, h / 2)``)
-             around its centre; the particles move outward along w_i.
-``sink``     all six domain faces, area-weighted: air drawn in from everywhere.
-``vortex``   a cylinder around its core line, radius ``emit.radius`` (default: out to the
-             farthest domain corner), the length of the core inside the domain; uniform
-             in volume. Particles circle the core until they leave or age out.
-``emit.box`` ``{min: [x, y, z], max: [x, y, z]}``: uniform in this axis-aligned box; a box
-             flat along one axis is a rectangle (e.g. a nozzle).
-============ ==============================================================================
-
-Per-source keys (all optional) in the scene's ``sources`` entries::
+Per-source keys (all optional)::
 
     emit:   {rate: 2000.0, radius: 0.5, box: {min: [...], max: [...]}}
     gusts:  {on: 1.0, off: 2.0, start: 0.0}
 
-``emit.rate`` is particles per second while the source emits (default
-``wind.particles_per_second``, or, when that is null, the automatic rate below);
-``gusts`` makes the wind come in gusts: emission during ``[start + k P, start + k P + on)``
-with ``P = on + off``, k = 0, 1, 2, ... and nothing before ``start``.
+``emit.rate`` is candidates per second while the source emits (default
+``wind.particles_per_second`` or, when that is null, the automatic rate
+``wind.particles_per_cell * A / (h^2 * wind.memory)``: each cell of the emitting
+cross-section A is crossed by about ``particles_per_cell`` new particles per memory
+window). ``gusts``: emission during ``[start + k P, start + k P + on)``, ``P = on + off``.
 
-Automatic rate: ``wind.particles_per_cell * A / (h^2 * wind.memory)``, i.e. each cell of
-the emitting cross-section ``A`` is crossed by about ``particles_per_cell`` new particles
-per memory window, so that a steady gust keeps every cell it reaches marked. ``A`` is the
-flux-weighted inflow cross-section for a uniform source, the whole boundary for a sink and
-the domain's largest face for a point source or vortex (a heuristic: their particles spread).
-
-Positions are stratified: the emitting region is cut into strata about one cell wide
-(for a uniform source's face exactly its cells; a face's share of strata follows its
-flux), and emission proceeds in rounds in which every stratum emits exactly one particle,
-at a uniformly jittered point, in a seeded random order. A round of the automatic rate
-lasts ``memory / particles_per_cell``, so no cell of the emitting face waits longer than
-two rounds for its next particle (plain random emission leaves Poisson gaps). Emission
-instants within a step are uniform over its emitting time. Everything random comes from
-``numpy.random.default_rng([seed, source, block])``, a block being the B >= 1 consecutive
-rounds that make at least ``BLOCK`` samples (one random stream per few thousand particles,
-drawn once and kept by the backend while it lasts): the same seed gives the same
-particles bit for bit. Candidates that fall outside the grid or inside a rigid body are
-dropped (``rate`` counts candidates).
+Positions are stratified: the region is cut into strata about one cell wide and emission
+proceeds in rounds in which every stratum emits one particle, at a jittered point, in a
+seeded random order, so no emitting cell waits long for its next particle (plain random
+emission leaves Poisson gaps). Everything random comes from
+``numpy.random.default_rng([seed, source, block])``, a block being whole rounds of at
+least ``BLOCK`` samples: the same seed gives the same particles bit for bit. Candidates
+outside the grid or inside a rigid body are dropped by the backend.
 """
 
 from __future__ import annotations
@@ -281,7 +264,7 @@ def gust_schedule(spec, key: str) -> GustSchedule:
     return GustSchedule(
         on=_positive(spec, "on", key),
         off=_positive(spec, "off", key, allow_zero=True),
-        start=float(spec.get("start", 0.0)),
+        start=float(spec.get("start", GustSchedule.start)),
     )
 
 
@@ -300,72 +283,95 @@ def _cross_section(kind: str, velocity, lower, upper) -> tuple[np.ndarray, float
     return weights, float(weights.sum())
 
 
-def emitters_from_scene(scene, grid, wind_cfg, seed: int) -> tuple[Emitter, ...]:
-    """One :class:`Emitter` per scene source (see module docstring for the keys)."""
-    lower, upper = np.asarray(grid.lower, dtype=float), np.asarray(grid.upper, dtype=float)
+@dataclass(frozen=True)
+class EmissionSpec:
+    """One source's checked ``emit`` and ``gusts`` entries (None: not set)."""
+
+    rate: float | None
+    radius: float | None
+    box: tuple[np.ndarray, np.ndarray] | None
+    gusts: GustSchedule
+
+
+def _box(box, key: str) -> tuple[np.ndarray, np.ndarray]:
+    if not isinstance(box, Mapping) or set(box) != {"min", "max"}:
+        raise ConfigError(key, "must be {min: [x, y, z], max: [x, y, z]}")
+    lo, hi = _vec3(box["min"], f"{key}.min"), _vec3(box["max"], f"{key}.max")
+    if np.any(hi < lo):
+        raise ConfigError(f"{key}.max", f"must be >= min on every axis, got {lo} .. {hi}")
+    return lo, hi
+
+
+def emission_spec(prim, spec: Mapping, key: str) -> EmissionSpec:
+    """Check one scene source's ``emit`` / ``gusts`` keys; ConfigError naming the first bad one."""
+    emit = spec.get("emit") or {}
+    if not isinstance(emit, Mapping):
+        raise ConfigError(f"{key}.emit", f"must be a mapping with keys {sorted(EMIT_KEYS)}")
+    unknown = set(emit) - EMIT_KEYS
+    if unknown:
+        raise ConfigError(
+            f"{key}.emit", f"unknown key(s) {sorted(unknown)}; allowed {sorted(EMIT_KEYS)}"
+        )
+    if "radius" in emit and prim.kind == "uniform":
+        raise ConfigError(f"{key}.emit.radius", "applies to source, sink and vortex only")
+    gusts = gust_schedule(spec.get("gusts"), f"{key}.gusts")
+    box = _box(emit["box"], f"{key}.emit.box") if emit.get("box") is not None else None
+    if box is None and prim.kind == "uniform" and not np.any(np.asarray(prim.velocity)):
+        raise ConfigError(f"{key}.velocity", "a uniform source needs a non-zero velocity")
+    radius = _positive(emit, "radius", f"{key}.emit") if "radius" in emit else None
+    rate = _positive(emit, "rate", f"{key}.emit", allow_zero=True) if "rate" in emit else None
+    return EmissionSpec(rate, radius, box, gusts)
+
+
+def emission_specs(scene) -> tuple[EmissionSpec, ...]:
+    """The checked emission settings of every scene source (what ``check`` needs)."""
+    return tuple(
+        emission_spec(prim, spec, f"scene.sources[{i}]")
+        for i, (prim, spec) in enumerate(zip(scene.sources, scene.source_specs, strict=True))
+    )
+
+
+def _region(prim, spec: EmissionSpec, lower, upper, h):
+    """(region, geometry, strata, cross-section of the automatic rate) of one source."""
     ext = upper - lower
     largest_face = float(np.sort(ext)[1:].prod())
-    h = grid.h
+    if spec.box is not None:
+        lo, hi = spec.box
+        flat = np.sort(np.where(hi - lo > 0, hi - lo, 0.0))[1:]
+        section = float(flat.prod()) if flat.prod() > 0 else h * h
+        return BOX, (lo, hi), _grid_strata([_cells(v, h) for v in hi - lo]), section
+    if prim.kind in ("uniform", "sink"):
+        weights, section = _cross_section(prim.kind, np.asarray(prim.velocity), lower, upper)
+        rows, strata = _faces(lower, upper, weights, h)
+        return FACES, (rows,), strata, section
+    centre = np.asarray(prim.center, dtype=float)
+    if prim.kind == "source":
+        r = spec.radius or max(prim.core_radius, 0.5 * h)
+        m = _cells(np.sqrt(2 * np.pi) * r, h)  # (cos theta, phi) strata ~ h^2 each
+        return SPHERE, (centre, r), _grid_strata((m, 2 * m, 1)), largest_face
+    # vortex: a cylinder around the core line, out to the farthest domain corner
+    axis = np.asarray(prim.axis, dtype=float)
+    axis = axis / np.linalg.norm(axis)
     corners = lower + ext * np.array(
         [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float
     )
+    s = (corners - centre) @ axis
+    r = spec.radius or float(np.linalg.norm((corners - centre) - s[:, None] * axis, axis=1).max())
+    strata = _grid_strata((_cells(float(s.max() - s.min()), h), _cells(r, h), 1))
+    return CYLINDER, (centre, axis, float(s.min()), float(s.max()), r), strata, largest_face
+
+
+def emitters_from_scene(scene, grid, wind_cfg, seed: int) -> tuple[Emitter, ...]:
+    """One :class:`Emitter` per scene source (see module docstring for the keys)."""
+    lower, upper = np.asarray(grid.lower, dtype=float), np.asarray(grid.upper, dtype=float)
     emitters = []
-    for i, (prim, spec) in enumerate(zip(scene.sources, scene.source_specs, strict=True)):
-        key = f"scene.sources[{i}]"
-        emit = spec.get("emit") or {}
-        if not isinstance(emit, Mapping):
-            raise ConfigError(f"{key}.emit", f"must be a mapping with keys {sorted(EMIT_KEYS)}")
-        unknown = set(emit) - EMIT_KEYS
-        if unknown:
-            raise ConfigError(
-                f"{key}.emit", f"unknown key(s) {sorted(unknown)}; allowed {sorted(EMIT_KEYS)}"
-            )
-        if "radius" in emit and prim.kind == "uniform":
-            raise ConfigError(f"{key}.emit.radius", "applies to source, sink and vortex only")
-        gusts = gust_schedule(spec.get("gusts"), f"{key}.gusts")
-        centre = np.asarray(prim.center, dtype=float)
-        axis = np.asarray(prim.axis, dtype=float)
-        axis = axis / np.linalg.norm(axis)
-        if emit.get("box") is not None:
-            box = emit["box"]
-            if not isinstance(box, Mapping) or set(box) != {"min", "max"}:
-                raise ConfigError(f"{key}.emit.box", "must be {min: [x, y, z], max: [x, y, z]}")
-            lo = _vec3(box["min"], f"{key}.emit.box.min")
-            hi = _vec3(box["max"], f"{key}.emit.box.max")
-            if np.any(hi < lo):
-                raise ConfigError(
-                    f"{key}.emit.box.max", f"must be >= min on every axis, got {lo} .. {hi}"
-                )
-            region, geometry = BOX, (lo, hi)
-            strata = _grid_strata([_cells(v, h) for v in hi - lo])
-            flat = np.sort(np.where(hi - lo > 0, hi - lo, 0.0))[1:]
-            section = float(flat.prod()) if flat.prod() > 0 else h * h
-        elif prim.kind in ("uniform", "sink"):
-            weights, section = _cross_section(prim.kind, np.asarray(prim.velocity), lower, upper)
-            if section == 0.0:
-                raise ConfigError(f"{key}.velocity", "a uniform source needs a non-zero velocity")
-            rows, strata = _faces(lower, upper, weights, h)
-            region, geometry = FACES, (rows,)
-        elif prim.kind == "source":
-            r = _positive(emit, "radius", f"{key}.emit") if "radius" in emit else None
-            r = r or max(prim.core_radius, 0.5 * h)
-            region, geometry = SPHERE, (centre, r)
-            m = _cells(np.sqrt(2 * np.pi) * r, h)  # (cos theta, phi) strata ~ h^2 each
-            strata = _grid_strata((m, 2 * m, 1))
-            section = largest_face
-        else:  # vortex: a cylinder around the core line
-            s = (corners - centre) @ axis
-            radial = np.linalg.norm((corners - centre) - s[:, None] * axis, axis=1)
-            r = _positive(emit, "radius", f"{key}.emit") if "radius" in emit else None
-            r = r or float(radial.max())
-            region, geometry = CYLINDER, (centre, axis, float(s.min()), float(s.max()), r)
-            strata = _grid_strata((_cells(float(s.max() - s.min()), h), _cells(r, h), 1))
-            section = largest_face
-        if "rate" in emit:
-            rate = _positive(emit, "rate", f"{key}.emit", allow_zero=True)
+    for i, (prim, spec) in enumerate(zip(scene.sources, emission_specs(scene), strict=True)):
+        region, geometry, strata, section = _region(prim, spec, lower, upper, grid.h)
+        if spec.rate is not None:
+            rate = spec.rate
         elif wind_cfg.particles_per_second is not None:
             rate = float(wind_cfg.particles_per_second)
-        else:
-            rate = wind_cfg.particles_per_cell * section / (h * h * wind_cfg.memory)
-        emitters.append(Emitter(i, region, rate, gusts, int(seed), geometry, strata))
+        else:  # automatic: particles_per_cell per emitting cell per memory window
+            rate = wind_cfg.particles_per_cell * section / (grid.h * grid.h * wind_cfg.memory)
+        emitters.append(Emitter(i, region, rate, spec.gusts, int(seed), geometry, strata))
     return tuple(emitters)

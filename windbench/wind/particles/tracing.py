@@ -2,46 +2,41 @@
 collision, and the cell field u = sum of the reached sources' w_i.
 
 A particle of source i moves only in w_i (never the superposed field) by the paper's
-explicit Euler step ``p_{t+dt} = p_t + w_i(p_t) dt``. Its path is walked cell by cell
-(Amanatides & Woo's voxel traversal), so each piece lies inside one cell ("subdivided
-into parts not exceeding the size of a grid cell") and no cell on the way is skipped.
+explicit Euler step ``p_{t+dt} = p_t + w_i(p_t) dt`` (:func:`euler_velocities` evaluates
+w_i(p_t)). Its path is walked cell by cell (Amanatides & Woo's voxel traversal), so each
+piece lies inside one cell ("subdivided into parts not exceeding the size of a grid
+cell") and no cell on the way is skipped.
 
 Each piece is tested only against what is registered in its cell: the rigid bodies whose
 surface may reach into the cell (:func:`register_bodies`) and the cloth triangles that
-overlap it (:func:`windbench.geometry.raster.register_triangles`), so the cost is
-O(particles x cells crossed), not O(particles x triangles). At the first hit the particle
-stops on the surface (``delta`` outside it) and its velocity loses the normal component,
-``w <- w - (n . w) n``; it spends the rest of the step sliding along the object. A head-on
-hit (nothing left of w) ends the particle: its gust has stagnated at the wall.
-
-Rigid bodies are convex (box, capsule, cylinder, plane), so their signed distance d is a
-convex function along a piece; :func:`convex_first_hit` finds the first root of d exactly
-(to round-off) without marching, also for thin poles (``resolve: false`` bodies are
-obstacles like any other; their lee is thinner than a cell and mostly invisible on the grid).
+overlap it (:func:`register_cloth`), so the cost is O(particles x cells crossed). At the
+first hit the particle stops on the surface (``delta`` outside it) and its velocity loses
+the normal component, the paper's ``w_i <- w_i - (n_obj . w_i) n_obj``; it spends the
+rest of the step sliding along the object. A head-on hit (nothing left of w) ends the
+particle: its gust has stagnated at the wall. Rigid bodies are convex, so their signed
+distance is convex along a piece and :func:`convex_first_hit` finds its first root exactly.
 
 Cell state per (cell, source): ``marked[c, s]``, the time the source's particles last
-reached the cell (-inf: never), and ``values[c, s]``, the value that mark left (with one
-source, ``values`` is u itself: u is that value while it counts). Choice (documented in
-:mod:`windbench.wind.particles`): a free particle leaves w_i at the cell centre, so with
-no obstacles the field equals the ``global`` backend's exactly. After a hit,
-``mark_mode`` says which contact normals the particle's later marks in this step remove
-from w_i(centre) (the paper's u(p_col) . n_obj = 0): those of every hit (``all``), of
-rigid bodies only (``bodies``) or none. Within one step a deflected mark beats a free one
-(the no-penetration condition wins at the surface); otherwise the later mark wins. The
-kernels run serially over the particles in their stored order, so a run is bit-for-bit
-reproducible.
+reached the cell (-inf: never), and ``values[c, s]``, the value that mark left. A free
+particle leaves w_i at the cell centre, so with no obstacles u equals the ``global``
+backend's field; after a hit, ``mark_mode`` says which contact normals its later marks
+remove from w_i(centre) (the paper's ``u(p_col) . n_obj = 0``): every hit's (``all``),
+rigid bodies' (``bodies``) or none. Within one step a deflected mark beats a free one;
+otherwise the later mark wins. A cell holds the paper's ``u = sum_i w_i`` over the
+sources that reached it within ``memory``; u is refreshed only where marks change and
+where they lapse (:func:`expire_cells`), never by a pass over the grid. The kernels run
+serially over the particles in their stored order, so a run is bit-for-bit reproducible.
 
-Cost per step, none of it a pass over the grid: u is refreshed in a cell when a mark
-there changes (in :func:`trace_gusts`) and when its last marks lapse ``memory`` later
-(:func:`expire_cells`, over the cells first marked that many steps before); a per-cell
-byte of flags (SOLID, BODIES, TRIANGLES) says where there is anything to test, and the
-cloth's cells are flagged and unflagged in O(overlaps) (:func:`register_cloth`). On
-large grids the cell state does not fit in the caches and a crossing would wait for
-memory: the kernel evaluates w_i a few particles ahead and prefetches the cells their
-paths will mark (``prefetch``; no effect on the numbers).
+The kernels take a few structured arguments (named tuples of arrays and scalars): the
+fixed :class:`GustModel`, the cloth registered this step (:class:`ClothCells`), the
+changing :class:`CellState` and :class:`Particles`, the :class:`TraceStep` being taken
+and the :class:`TraceWork` scratch. On large grids the cell state does not fit in the
+caches: the tracing then prefetches the cells of the particle AHEAD places on.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from llvmlite import ir
@@ -62,41 +57,133 @@ RADIX_BITS = 11  # bits of the cell id sorted per pass of sort_by_cell
 RADIX = 1 << RADIX_BITS
 
 
+class CellGrid(NamedTuple):
+    """The wind grid as the kernels see it (scalars); cell id c = (i * ny + j) * nz + k."""
+
+    lower: tuple[float, float, float]  # lower corner, m
+    upper: tuple[float, float, float]  # upper corner, m
+    h: float  # cell width, m
+    shape: tuple[int, int, int]  # cells per axis
+
+
+class BodyCells(NamedTuple):
+    """Rigid bodies (:func:`~windbench.geometry.bodies.body_table`) and, as CSR, the bodies
+    registered in each cell: those of cell c are ``items[start[c]:start[c + 1]]``."""
+
+    kinds: np.ndarray
+    params: np.ndarray
+    start: np.ndarray
+    items: np.ndarray
+
+
+class TraceRules(NamedTuple):
+    """The backend's fixed parameters as the kernels read them."""
+
+    max_age: float  # s; older particles die
+    memory: float  # s; a mark counts this long
+    delta: float  # m; particles rest this far outside a surface they hit
+    max_hits: int  # hits per particle per step
+    mark_mode: int  # MARK_NONE | MARK_BODIES | MARK_ALL
+
+
+class GustModel(NamedTuple):
+    """Everything fixed at construction: grid, sources' w_i table, bodies, rules."""
+
+    grid: CellGrid
+    source_kinds: np.ndarray  # (n_sources,) primitive kinds
+    source_params: np.ndarray  # (n_sources, 11) primitive rows
+    bodies: BodyCells
+    rules: TraceRules
+
+
+class ClothCells(NamedTuple):
+    """The cloth triangles of this step and the cells they overlap (:func:`register_cloth`):
+    the triangles of a TRIANGLES cell c are ``items[start[slot[c]]:start[slot[c] + 1]]``;
+    ``bounds`` (m, 2, 3) their bounding boxes (min, max)."""
+
+    positions: np.ndarray
+    triangles: np.ndarray
+    bounds: np.ndarray
+    slot: np.ndarray
+    start: np.ndarray
+    items: np.ndarray
+
+
+class CellState(NamedTuple):
+    """Per-cell arrays that change: flags (SOLID, BODIES, TRIANGLES), ``marked`` (n_cells,
+    n_sources) times of the last marks, ``values`` (n_cells, n_sources, 3) what they left
+    (may be ``u`` itself with one source), and ``u`` (n_cells, 3)."""
+
+    flags: np.ndarray
+    marked: np.ndarray
+    values: np.ndarray
+    u: np.ndarray
+
+
+class Particles(NamedTuple):
+    """Particle buffers: position (N, 3), source id (N,), age (N,) (s)."""
+
+    positions: np.ndarray
+    sources: np.ndarray
+    ages: np.ndarray
+
+
+class TraceWork(NamedTuple):
+    """Scratch of :func:`trace_gusts`, owned by the backend's workspace; ``velocities``
+    (N, 3) holds w_i(p) of each particle (:func:`euler_velocities`) on entry."""
+
+    velocities: np.ndarray
+    value: np.ndarray  # (3,) the value a mark leaves
+    normal: np.ndarray  # (3,) normal of the nearest hit
+    body_normal: np.ndarray  # (3,)
+    root: np.ndarray  # (2, 3) scratch of convex_first_hit
+    piece: np.ndarray  # (2, 3) the piece a -> b for the triangle tests
+    normals: np.ndarray  # (max_hits, 3) normals of the hits that make marks deflected
+
+
+class TraceStep(NamedTuple):
+    """One step: particles 0..n-1 move, those from n_old on were emitted within the step
+    and move for ``new_durations[q - n_old]``; marks are stamped ``t_now``."""
+
+    dt: float
+    t_now: float
+    n: int
+    n_old: int
+    new_durations: np.ndarray
+    prefetch: bool  # prefetch the cells of particles AHEAD places on (no effect on numbers)
+
+
 @njit(cache=True)
-def register_bodies(kinds, params, lower, h, shape):
+def register_bodies(kinds, params, grid):
     """CSR (start, items) of the bodies whose surface may reach into each cell.
 
     Body b is registered in cell c when d_b(centre_c) <= half the cell diagonal, i.e. the
-    body meets the ball around the cell (cell id c = (i * ny + j) * nz + k).
+    body meets the ball around the cell.
     """
-    nx, ny, nz = shape[0], shape[1], shape[2]
+    nx, ny, nz = grid.shape
     n_cells = nx * ny * nz
-    reach = 0.5 * np.sqrt(3.0) * h * (1.0 + 1e-9)
+    reach = 0.5 * np.sqrt(3.0) * grid.h * (1.0 + 1e-9)
     normal = np.empty(3)
     start = np.zeros(n_cells + 1, dtype=np.int64)
-    for fill in range(2):
+    items = np.empty(0, dtype=np.int64)
+    for fill in range(2):  # count, then fill
         if fill == 1:
             for c in range(n_cells):
                 start[c + 1] += start[c]
             items = np.empty(start[n_cells], dtype=np.int64)
-            counts = np.zeros(n_cells, dtype=np.int64)
-        else:
-            items = np.empty(0, dtype=np.int64)
-            counts = np.zeros(0, dtype=np.int64)
-        for i in range(nx):
-            for j in range(ny):
-                for k in range(nz):
-                    c = (i * ny + j) * nz + k
-                    px = lower[0] + (i + 0.5) * h
-                    py = lower[1] + (j + 0.5) * h
-                    pz = lower[2] + (k + 0.5) * h
-                    for b in range(kinds.shape[0]):
-                        if body_distance(kinds[b], params[b], px, py, pz, normal) <= reach:
-                            if fill == 0:
-                                start[c + 1] += 1
-                            else:
-                                items[start[c] + counts[c]] = b
-                                counts[c] += 1
+        counts = np.zeros(n_cells if fill else 0, dtype=np.int64)
+        for c in range(n_cells):
+            i, j, k = c // (ny * nz), (c // nz) % ny, c % nz
+            px = grid.lower[0] + (i + 0.5) * grid.h
+            py = grid.lower[1] + (j + 0.5) * grid.h
+            pz = grid.lower[2] + (k + 0.5) * grid.h
+            for b in range(kinds.shape[0]):
+                if body_distance(kinds[b], params[b], px, py, pz, normal) <= reach:
+                    if fill == 0:
+                        start[c + 1] += 1
+                    else:
+                        items[start[c] + counts[c]] = b
+                        counts[c] += 1
     return start, items
 
 
@@ -132,15 +219,17 @@ def register_cloth(keys, m, previous, flags, tri_slot):
 
 
 @njit(cache=True)
-def convex_first_hit(kind, prm, ax, ay, az, ex, ey, ez, scratch, normal):
+def convex_first_hit(kind, prm, a, e, scratch, normal):
     """First s in [0, 1] with d(a + s e) <= 0 for one convex body, or -1; outward normal.
 
     f(s) = d(a + s e) is convex (d of a convex set), with slope f'(s) = n(s) . e. No root
     when f(1) > 0 and either |e| <= f(0) + f(1) (1-Lipschitz), f'(0) >= 0 or f'(1) <= 0
     (monotone), or the tangent lines at a bracket of the minimum meet above zero; else the
     root is bracketed and bisected. A particle touching the surface (f(0) <= 0) hits at
-    s = 0 only if it moves inward. ``scratch`` is a (2, 3) work array.
+    s = 0 only if it moves inward. ``a``, ``e`` are 3-tuples; ``scratch`` a (2, 3) array.
     """
+    ax, ay, az = a
+    ex, ey, ez = e
     n0 = scratch[0]
     nm = scratch[1]
     length = np.sqrt(ex * ex + ey * ey + ez * ez)
@@ -214,7 +303,7 @@ def _reached(t_cell, t_now, memory):
 
 @njit(cache=True, inline="always")
 def _assemble_cell(c, marked, values, t_now, memory, u):
-    """u[c] = sum of the values of the sources that reached cell c within memory."""
+    """The paper's u = sum_i w_i in cell c, over the sources that reached it within memory."""
     ux = 0.0
     uy = 0.0
     uz = 0.0
@@ -226,6 +315,16 @@ def _assemble_cell(c, marked, values, t_now, memory, u):
     u[c, 0] = ux
     u[c, 1] = uy
     u[c, 2] = uz
+
+
+@njit(cache=True, inline="always")
+def _centre(ijk, g):
+    """Centre of cell (i, j, k) of the grid g."""
+    return (
+        g.lower[0] + (ijk[0] + 0.5) * g.h,
+        g.lower[1] + (ijk[1] + 0.5) * g.h,
+        g.lower[2] + (ijk[2] + 0.5) * g.h,
+    )
 
 
 @intrinsic
@@ -250,16 +349,16 @@ def _prefetch(typingctx, arr, index):
 
 
 @njit(cache=True, inline="always")
-def _look_ahead(px, py, pz, w, tau, lower, h, shape, s, flags, marked, u):
+def _look_ahead(p, w, tau, g, s, flags, marked, u):
     """Prefetch the cell state at the start, middle and end of the path p -> p + w tau of
     a particle traced a few places later (the cells it will most likely mark)."""
-    inv_h = 1.0 / h
+    inv_h = 1.0 / g.h
     for f in (0.0, 0.5 * tau, tau):
-        i = int(np.floor((px + f * w[0] - lower[0]) * inv_h))
-        j = int(np.floor((py + f * w[1] - lower[1]) * inv_h))
-        k = int(np.floor((pz + f * w[2] - lower[2]) * inv_h))
-        if 0 <= i < shape[0] and 0 <= j < shape[1] and 0 <= k < shape[2]:
-            c = (i * shape[1] + j) * shape[2] + k
+        i = int(np.floor((p[0] + f * w[0] - g.lower[0]) * inv_h))
+        j = int(np.floor((p[1] + f * w[1] - g.lower[1]) * inv_h))
+        k = int(np.floor((p[2] + f * w[2] - g.lower[2]) * inv_h))
+        if 0 <= i < g.shape[0] and 0 <= j < g.shape[1] and 0 <= k < g.shape[2]:
+            c = (i * g.shape[1] + j) * g.shape[2] + k
             _prefetch(flags, (c,))
             _prefetch(marked, (c, s))
             _prefetch(u, (c, 0))
@@ -279,308 +378,275 @@ def _walk_axis(p, e, lower, h, n):
     return inside, cell, step, np.inf, np.inf
 
 
-@njit(cache=True)
-def trace_gusts(
-    n,
-    n_old,
-    dt,
-    new_durations,
-    max_age,
-    kinds,
-    prims,
-    lower,
-    h,
-    shape,
-    flags,
-    body_kinds,
-    body_params,
-    body_start,
-    body_items,
-    cloth_positions,
-    cloth_triangles,
-    tri_bounds,
-    tri_slot,
-    tri_start,
-    tri_items,
-    t_now,
-    memory,
-    delta,
-    max_hits,
-    mark_mode,
-    prefetch,
-    positions,
-    sources,
-    ages,
-    marked,
-    values,
-    u,
-    touched,
-):
-    """Advance particles 0..n-1 in their own w_i (p += w_i(p) tau), mark cells, refresh u.
+@njit(cache=True, inline="always")
+def _start_walk(p, e, g):
+    """Amanatides & Woo's set-up for the path p -> p + e: (inside the grid, cell (i, j, k),
+    steps, path fraction of the next face per axis, path fraction per cell width, t = 0)."""
+    in_x, i, si, tx, cx = _walk_axis(p[0], e[0], g.lower[0], g.h, g.shape[0])
+    in_y, j, sj, ty, cy = _walk_axis(p[1], e[1], g.lower[1], g.h, g.shape[1])
+    in_z, k, sk, tz, cz = _walk_axis(p[2], e[2], g.lower[2], g.h, g.shape[2])
+    return in_x and in_y and in_z, (i, j, k), (si, sj, sk), (tx, ty, tz), (cx, cy, cz), 0.0
 
-    Particle q moves for tau = dt (q < n_old) or ``new_durations[q - n_old]`` (emitted
-    within the step). ``positions``, ``sources``, ``ages`` are updated in place and
-    compacted: the particles that stay alive (inside the grid, not stagnated, age <=
-    ``max_age``) keep their order at the front. ``flags`` (uint8 per cell: SOLID, BODIES,
-    TRIANGLES) say which cells hold obstacles, so a piece reads the registries only where
-    there is something to test; the triangles of a flagged cell are
-    ``tri_items[tri_start[tri_slot[cell]] : tri_start[tri_slot[cell] + 1]]``.
-    ``tri_bounds`` (m, 2, 3) are the triangles' bounding boxes (min, max): a cheap test
-    before Möller-Trumbore. ``marked`` (n_cells, n_sources: time of the last mark),
-    ``values`` (n_cells, n_sources, 3: the value it left) and ``u`` are updated in place in
-    the cells marked only; ``values`` may be ``u`` itself (one source: u is the value
-    while reached). ``touched`` collects the cells first marked this step (grown when
-    full). Returns (touched, n_touched, crossings, n_alive).
+
+@njit(cache=True, inline="always")
+def _cross_face(ijk, t_next, steps, t_cell, shape):
+    """Amanatides & Woo: into the next cell across the nearest face of the path.
+
+    Returns (cell indices, path fraction at the face, next faces, still inside the grid).
     """
-    nx, ny, nz = shape[0], shape[1], shape[2]
-    x0, y0, z0 = lower[0], lower[1], lower[2]
-    n_touched = 0
-    crossings = 0
-    n_alive = 0
-    wc = np.empty(3)
-    hit_n = np.empty(3)
-    tmp_n = np.empty(3)
-    scratch = np.empty((2, 3))
-    normals = np.empty((max_hits, 3))
-    a = np.empty(3)  # the piece a -> b in one cell, for the collision tests
-    b = np.empty(3)
-    ahead = np.empty((AHEAD, 3))  # w_i(p) of the next AHEAD particles, slot q % AHEAD
-    for q in range(-AHEAD, n):
-        qa = q + AHEAD
-        if q >= 0:
-            s = sources[q]
-            px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
-            vx, vy, vz = ahead[q % AHEAD, 0], ahead[q % AHEAD, 1], ahead[q % AHEAD, 2]
-        if qa < n:
-            # Euler: w_i(p_t), evaluated AHEAD particles early, and its cells prefetched
-            sa = sources[qa]
-            w = ahead[qa % AHEAD]
-            primitive_velocity(
-                kinds[sa], prims[sa], positions[qa, 0], positions[qa, 1], positions[qa, 2], w
-            )
-            if prefetch:
-                _look_ahead(
-                    positions[qa, 0],
-                    positions[qa, 1],
-                    positions[qa, 2],
-                    w,
-                    dt,
-                    lower,
-                    h,
-                    shape,
-                    sa,
-                    flags,
-                    marked,
-                    u,
-                )
-        if q < 0:
+    i, j, k = ijk
+    tx, ty, tz = t_next
+    if ty < tx:
+        axis = 2 if tz < ty else 1
+    else:
+        axis = 2 if tz < tx else 0
+    if axis == 0:
+        i += steps[0]
+        t = tx
+        tx += t_cell[0]
+        inside = 0 <= i < shape[0]
+    elif axis == 1:
+        j += steps[1]
+        t = ty
+        ty += t_cell[1]
+        inside = 0 <= j < shape[1]
+    else:
+        k += steps[2]
+        t = tz
+        tz += t_cell[2]
+        inside = 0 <= k < shape[2]
+    return (i, j, k), t, (tx, ty, tz), inside
+
+
+@njit(cache=True)
+def first_triangle_hit(cloth, cell, a, b, e, best, body_hit, normal):
+    """Earliest hit s < best of the piece a -> b (arrays; path direction e) on the cloth
+    triangles registered in ``cell``: bounding boxes first, then Möller-Trumbore. The
+    triangle's unit normal, turned against e, goes to ``normal``. Returns (s, whether the
+    nearest hit is a body): (best, body_hit) if no triangle is nearer."""
+    positions, triangles, bounds, slot, start, items = cloth
+    for m in range(start[slot[cell]], start[slot[cell] + 1]):
+        tri = items[m]
+        apart = False  # bounding boxes apart: the piece cannot meet this triangle
+        for ax in range(3):
+            lo, hi = min(a[ax], b[ax]), max(a[ax], b[ax])
+            apart |= lo > bounds[tri, 1, ax] or hi < bounds[tri, 0, ax]
+        if apart:
             continue
-        kind = kinds[s]
-        prm = prims[s]
-        duration = dt if q < n_old else new_durations[q - n_old]
-        w2 = vx * vx + vy * vy + vz * vz  # velocity v: w_i, deflected after hits
-        remaining = duration
+        va = positions[triangles[tri, 0]]
+        vb = positions[triangles[tri, 1]]
+        vc = positions[triangles[tri, 2]]
+        sh = segment_triangle(a, b, va, vb, vc)
+        if 0.0 <= sh < best:
+            best = sh
+            body_hit = False
+            tri_n = np.cross(vb - va, vc - va)
+            tri_n /= np.sqrt((tri_n * tri_n).sum())
+            if tri_n[0] * e[0] + tri_n[1] * e[1] + tri_n[2] * e[2] > 0.0:
+                tri_n = -tri_n
+            normal[:] = tri_n
+    return best, body_hit
+
+
+@njit(cache=True, inline="always")
+def _record_hit(mark_mode, body_hit, normal, normals, n_marks):
+    """Keep the hit's normal when ``mark_mode`` makes the later marks deflected; the count."""
+    if mark_mode == MARK_ALL or (mark_mode == MARK_BODIES and body_hit):
+        normals[n_marks] = normal
+        n_marks += 1
+    return n_marks
+
+
+@njit(cache=True)
+def _remove_normals(w, normals, n_marks):
+    """w <- w - (n . w) n for the normals of the marking hits (u(p_col) . n_obj = 0)."""
+    for m in range(n_marks):
+        dn = w[0] * normals[m, 0] + w[1] * normals[m, 1] + w[2] * normals[m, 2]
+        w[0] -= dn * normals[m, 0]
+        w[1] -= dn * normals[m, 1]
+        w[2] -= dn * normals[m, 2]
+
+
+@njit(cache=True, inline="always")
+def _slide(p, v, e, th, delta, n):
+    """Stop on the surface at path fraction th (``delta`` outside along the normal n) and
+    keep the tangential velocity, the paper's w - (n . w) n. Returns (p, v)."""
+    px = p[0] + (th * e[0] + delta * n[0])
+    py = p[1] + (th * e[1] + delta * n[1])
+    pz = p[2] + (th * e[2] + delta * n[2])
+    dn = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
+    return (px, py, pz), (v[0] - dn * n[0], v[1] - dn * n[1], v[2] - dn * n[2])
+
+
+@njit(cache=True, inline="always")
+def _after_hit(p, v, e, th, delta, n, remaining, w2):
+    """:func:`_slide`, and what is left of the step. Returns (p, v, the time left, whether
+    the particle stagnated: a head-on hit leaves nothing of w)."""
+    p, v = _slide(p, v, e, th, delta, n)
+    stagnant = v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= 1e-24 * w2
+    return p, v, remaining * (1.0 - th), stagnant
+
+
+@njit(cache=True)
+def euler_velocities(model, particles, n, out):
+    """out[q] = w_i(p_q) for particles 0..n-1, each in its own source's field: the velocity
+    of the paper's Euler step p_{t+dt} = p_t + w_i(p_t) dt (§4.2.2)."""
+    kinds, prims = model.source_kinds, model.source_params
+    positions, sources, _ = particles
+    for q in range(n):
+        s = sources[q]
+        primitive_velocity(
+            kinds[s], prims[s], positions[q, 0], positions[q, 1], positions[q, 2], out[q]
+        )
+
+
+@njit(cache=True)
+def trace_gusts(model, cloth, cells, particles, step, work, touched):
+    """Move particles 0..n-1 by the Euler step p += w_i(p) tau (§4.2.2, ``work.velocities``),
+    mark the cells their paths cross, slide them along what they hit, compact the survivors.
+    Returns (touched, n_touched, crossings, n_alive) (module docstring)."""
+    kinds, prims, rules, g = model.source_kinds, model.source_params, model.rules, model.grid
+    b_kinds, b_params, b_start, b_items = model.bodies
+    flags, marked, values, u = cells
+    positions, sources, ages = particles
+    velocities, wc, hit_n, tmp_n, scratch, ab, normals = work
+    a, b, ny, nz = ab[0], ab[1], g.shape[1], g.shape[2]
+    n_touched, crossings, n_alive = 0, 0, 0
+    for q in range(step.n):
+        qa = q + AHEAD
+        if step.prefetch and qa < step.n:  # the cells a later particle will mark
+            pa = (positions[qa, 0], positions[qa, 1], positions[qa, 2])
+            wa = (velocities[qa, 0], velocities[qa, 1], velocities[qa, 2])
+            _look_ahead(pa, wa, step.dt, g, sources[qa], flags, marked, u)
+        s = sources[q]
+        px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
+        vx, vy, vz = velocities[q, 0], velocities[q, 1], velocities[q, 2]
+        tau = step.dt if q < step.n_old else step.new_durations[q - step.n_old]
+        w2 = vx * vx + vy * vy + vz * vz
+        remaining = tau
         n_hits = 0
-        n_marks = 0  # hits whose normal the cell marks remove (see mark_mode)
-        alive = True
+        n_marks = 0  # hits whose normal the marks remove (rules.mark_mode)
         stagnant = False
-        moving = True
-        while moving:
-            # one straight path p -> p + e, e = v * remaining, walked cell by cell
-            # (Amanatides-Woo): cell (i, j, k), next face at path fraction t_next*
-            moving = False
+        while True:  # one straight path p -> p + e, e = v * remaining, cell by cell
             ex, ey, ez = vx * remaining, vy * remaining, vz * remaining
-            in_x, i, si, t_next_x, t_cell_x = _walk_axis(px, ex, x0, h, nx)
-            in_y, j, sj, t_next_y, t_cell_y = _walk_axis(py, ey, y0, h, ny)
-            in_z, k, sk, t_next_z, t_cell_z = _walk_axis(pz, ez, z0, h, nz)
-            if not (in_x and in_y and in_z):
-                alive = False
+            inside, (i, j, k), steps, (tx, ty, tz), t_cell, t = _start_walk(
+                (px, py, pz), (ex, ey, ez), g
+            )
+            if not inside:
                 break
-            t = 0.0
             while True:
-                t_exit = max(t, min(t_next_x, t_next_y, t_next_z, 1.0))
+                t_exit = max(t, min(tx, ty, tz, 1.0))
                 cell = (i * ny + j) * nz + k
                 best = 2.0
                 body_hit = False
                 obstacles = flags[cell] & (BODIES | TRIANGLES)
-                if obstacles:
-                    # the piece a -> b lies in this cell: test what is registered here
+                if obstacles:  # the piece a -> b lies in this cell: test what it registers
                     a[0], a[1], a[2] = px + t * ex, py + t * ey, pz + t * ez
                     b[0], b[1], b[2] = px + t_exit * ex, py + t_exit * ey, pz + t_exit * ez
                 if obstacles & BODIES:
-                    for m in range(body_start[cell], body_start[cell + 1]):
-                        bi = body_items[m]
+                    for m in range(b_start[cell], b_start[cell + 1]):
+                        bi = b_items[m]
+                        e_ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
                         sh = convex_first_hit(
-                            body_kinds[bi],
-                            body_params[bi],
-                            a[0],
-                            a[1],
-                            a[2],
-                            b[0] - a[0],
-                            b[1] - a[1],
-                            b[2] - a[2],
-                            scratch,
-                            tmp_n,
+                            b_kinds[bi], b_params[bi], (a[0], a[1], a[2]), e_ab, scratch, tmp_n
                         )
                         if 0.0 <= sh < best:
                             best = sh
                             body_hit = True
                             hit_n[:] = tmp_n
                 if obstacles & TRIANGLES:
-                    slot = tri_slot[cell]
-                    for m in range(tri_start[slot], tri_start[slot + 1]):
-                        tri = tri_items[m]
-                        # bounding boxes apart: the piece cannot meet this triangle
-                        apart = False
-                        for ax in range(3):
-                            lo_ab = min(a[ax], b[ax])
-                            hi_ab = max(a[ax], b[ax])
-                            if lo_ab > tri_bounds[tri, 1, ax] or hi_ab < tri_bounds[tri, 0, ax]:
-                                apart = True
-                        if apart:
-                            continue
-                        va = cloth_positions[cloth_triangles[tri, 0]]
-                        vb = cloth_positions[cloth_triangles[tri, 1]]
-                        vc = cloth_positions[cloth_triangles[tri, 2]]
-                        sh = segment_triangle(a, b, va, vb, vc)
-                        if 0.0 <= sh < best:
-                            best = sh
-                            body_hit = False
-                            # the triangle's unit normal, turned to face the particle
-                            tri_n = np.cross(vb - va, vc - va)
-                            tri_n /= np.sqrt((tri_n * tri_n).sum())
-                            if tri_n[0] * ex + tri_n[1] * ey + tri_n[2] * ez > 0.0:
-                                tri_n = -tri_n
-                            hit_n[:] = tri_n
+                    best, body_hit = first_triangle_hit(
+                        cloth, cell, a, b, (ex, ey, ez), best, body_hit, hit_n
+                    )
                 if best <= 1.0:
                     n_hits += 1
-                    if mark_mode == MARK_ALL or (mark_mode == MARK_BODIES and body_hit):
-                        normals[n_marks] = hit_n
-                        n_marks += 1
-                if marked[cell, s] != t_now or n_marks > 0:
-                    # mark the cell for source s with w_i(centre), the contact normals of
-                    # the marking hits removed, and refresh u there (air cells only: a
-                    # solid cell keeps u = 0 and stores no value). A free mark repeated
-                    # within the step changes nothing; a deflected one beats a free one.
-                    first = marked[cell, s] != t_now
-                    cx = x0 + (i + 0.5) * h
-                    cy = y0 + (j + 0.5) * h
-                    cz = z0 + (k + 0.5) * h
-                    primitive_velocity(kind, prm, cx, cy, cz, wc)
-                    for m in range(n_marks):
-                        # w <- w - (n . w) n for each marking hit so far in this step
-                        dn = wc[0] * normals[m, 0] + wc[1] * normals[m, 1] + wc[2] * normals[m, 2]
-                        wc[0] -= dn * normals[m, 0]
-                        wc[1] -= dn * normals[m, 1]
-                        wc[2] -= dn * normals[m, 2]
-                    marked[cell, s] = t_now
-                    if not flags[cell] & SOLID:
-                        values[cell, s, 0] = wc[0]
-                        values[cell, s, 1] = wc[1]
-                        values[cell, s, 2] = wc[2]
-                        _assemble_cell(cell, marked, values, t_now, memory, u)
+                    n_marks = _record_hit(rules.mark_mode, body_hit, hit_n, normals, n_marks)
+                if marked[cell, s] != step.t_now or n_marks > 0:  # a free repeat changes nothing
+                    first = marked[cell, s] != step.t_now
+                    cx, cy, cz = _centre((i, j, k), g)
+                    # w_i(centre), less the normals of the marking hits (if any)
+                    primitive_velocity(kinds[s], prims[s], cx, cy, cz, wc)
+                    if n_marks:
+                        _remove_normals(wc, normals, n_marks)
+                    marked[cell, s] = step.t_now
+                    if not flags[cell] & SOLID:  # a solid cell keeps u = 0
+                        values[cell, s, 0], values[cell, s, 1], values[cell, s, 2] = wc
+                        _assemble_cell(cell, marked, values, step.t_now, rules.memory, u)
                     if first:  # its marks lapse memory later: on the touched list
                         touched = _push(touched, n_touched, cell)
                         n_touched += 1
                 crossings += 1
-                if best <= 1.0:
-                    # stop on the surface, lose the normal component: w - (n . w) n
-                    th = t + best * (t_exit - t)
-                    px += th * ex + delta * hit_n[0]
-                    py += th * ey + delta * hit_n[1]
-                    pz += th * ez + delta * hit_n[2]
-                    remaining *= 1.0 - th
-                    dn = vx * hit_n[0] + vy * hit_n[1] + vz * hit_n[2]
-                    vx -= dn * hit_n[0]
-                    vy -= dn * hit_n[1]
-                    vz -= dn * hit_n[2]
-                    if vx * vx + vy * vy + vz * vz <= 1e-24 * w2:
-                        stagnant = True  # head-on: the gust stagnates at the wall
+                if best <= 1.0:  # slide on; a path of length 0 still marks its resting cell
+                    th, n = t + best * (t_exit - t), (hit_n[0], hit_n[1], hit_n[2])
+                    (px, py, pz), (vx, vy, vz), remaining, stagnant = _after_hit(
+                        (px, py, pz), (vx, vy, vz), (ex, ey, ez), th, rules.delta, n, remaining, w2
+                    )
+                    if stagnant or n_hits >= rules.max_hits:
                         remaining = 0.0
-                    elif n_hits >= max_hits:
-                        remaining = 0.0
-                    # slide on along the surface; a path of length 0 still marks the cell
-                    # the particle rests in (across the face the hit may have lain on)
-                    moving = True
                     break
                 if t_exit >= 1.0:
-                    px += ex
-                    py += ey
-                    pz += ez
+                    px, py, pz = px + ex, py + ey, pz + ez
                     break
-                # into the next cell across the nearest face
-                if t_next_y < t_next_x:
-                    axis = 2 if t_next_z < t_next_y else 1
-                else:
-                    axis = 2 if t_next_z < t_next_x else 0
-                if axis == 0:
-                    i += si
-                    t = t_next_x
-                    t_next_x += t_cell_x
-                    inside = 0 <= i < nx
-                elif axis == 1:
-                    j += sj
-                    t = t_next_y
-                    t_next_y += t_cell_y
-                    inside = 0 <= j < ny
-                else:
-                    k += sk
-                    t = t_next_z
-                    t_next_z += t_cell_z
-                    inside = 0 <= k < nz
+                (i, j, k), t, (tx, ty, tz), inside = _cross_face(
+                    (i, j, k), (tx, ty, tz), steps, t_cell, g.shape
+                )
                 if not inside:
-                    alive = False
                     break
-        age = ages[q] + duration
-        if alive and not stagnant and age <= max_age:
-            positions[n_alive, 0] = px
-            positions[n_alive, 1] = py
-            positions[n_alive, 2] = pz
-            sources[n_alive] = s
-            ages[n_alive] = age
+            if best > 1.0:  # the path ended without a hit: so does the particle's step
+                break
+        if inside and not stagnant and ages[q] + tau <= rules.max_age:
+            positions[n_alive, 0], positions[n_alive, 1], positions[n_alive, 2] = px, py, pz
+            sources[n_alive], ages[n_alive] = s, ages[q] + tau
             n_alive += 1
     return touched, n_touched, crossings, n_alive
 
 
 @njit(cache=True)
-def expire_cells(cells, t_mark, marked, values, flags, t_now, memory, u):
+def expire_cells(cell_list, t_mark, cells, t_now, memory):
     """Refresh u in the cells marked at t_mark whose mark has just expired.
 
     A cell of the list whose marks of t_mark have all been renewed since keeps its u
     (nothing about it changed); the others get u = sum of the still-reached sources.
     """
-    for m in range(cells.shape[0]):
-        if m + AHEAD < cells.shape[0]:
-            _prefetch(marked, (cells[m + AHEAD], 0))
-            _prefetch(u, (cells[m + AHEAD], 0))
-        c = cells[m]
-        if flags[c] & SOLID:
+    marked, u = cells.marked, cells.u
+    for m in range(cell_list.shape[0]):
+        if m + AHEAD < cell_list.shape[0]:
+            _prefetch(marked, (cell_list[m + AHEAD], 0))
+            _prefetch(u, (cell_list[m + AHEAD], 0))
+        c = cell_list[m]
+        if cells.flags[c] & SOLID:
             continue
         for s in range(marked.shape[1]):
             if marked[c, s] == t_mark:
-                _assemble_cell(c, marked, values, t_now, memory, u)
+                _assemble_cell(c, marked, cells.values, t_now, memory, u)
                 break
 
 
 @njit(cache=True)
-def sort_by_cell(n, lower, h, shape, positions, sources, ages):
-    """Reorder particles 0..n-1 in place by cell id c = (i * ny + j) * nz + k, stably.
-
-    LSD radix sort, 11 bits of c a pass (two passes up to 4 M cells): O(n) per pass, no
-    pass over the grid.
-    """
+def cell_ids(grid, positions, n):
+    """Cell id c = (i * ny + j) * nz + k of positions 0..n-1, clamped into the grid."""
     keys = np.empty(n, dtype=np.int64)
     for q in range(n):
         c = 0
         for ax in range(3):
-            i = int(np.floor((positions[q, ax] - lower[ax]) / h))
-            c = c * shape[ax] + min(max(i, 0), shape[ax] - 1)
+            i = int(np.floor((positions[q, ax] - grid.lower[ax]) / grid.h))
+            c = c * grid.shape[ax] + min(max(i, 0), grid.shape[ax] - 1)
         keys[q] = c
+    return keys
+
+
+@njit(cache=True)
+def sort_by_cell(grid, n, particles):
+    """Reorder particles 0..n-1 in place by cell id (:func:`cell_ids`), stably.
+
+    LSD radix sort, RADIX_BITS of the id a pass: O(n) per pass, no pass over the grid.
+    """
+    keys = cell_ids(grid, particles.positions, n)
     order = np.arange(n)
     order_tmp = np.empty(n, dtype=np.int64)
     keys_tmp = np.empty(n, dtype=np.int64)
     count = np.empty(RADIX + 1, dtype=np.int64)
-    top = shape[0] * shape[1] * shape[2] - 1
+    top = grid.shape[0] * grid.shape[1] * grid.shape[2] - 1
     shift = 0
     while top >> shift > 0:
         count[:] = 0
@@ -596,6 +662,7 @@ def sort_by_cell(n, lower, h, shape, positions, sources, ages):
         order, order_tmp = order_tmp, order
         keys, keys_tmp = keys_tmp, keys
         shift += RADIX_BITS
+    positions, sources, ages = particles
     old_positions = positions[:n].copy()
     old_sources = sources[:n].copy()
     old_ages = ages[:n].copy()
@@ -617,37 +684,30 @@ def reached_sources(marked, t_now, memory, out):
 
 
 @njit(cache=True)
-def admit_particles(
-    candidates,
-    candidate_sources,
-    candidate_durations,
-    lower,
-    upper,
-    kinds,
-    params,
-    room,
-    n,
-    positions,
-    sources,
-    ages,
-    durations,
-):
+def admit_particles(candidates, model, room, n, particles, durations):
     """Append the candidates that lie in the grid's half-open box [lower, upper) and outside
-    every body, in order, at most ``room`` of them, after particle n - 1 (age 0; their
-    durations compacted into ``durations``). Returns how many were admitted."""
+    every body, in order, at most ``room`` of them, after particle n - 1 (age 0).
+
+    ``candidates`` = (positions, sources, durations in the step); the admitted ones'
+    durations are compacted into ``durations``. Returns how many were admitted.
+    """
+    points, candidate_sources, candidate_durations = candidates
+    lower, upper = model.grid.lower, model.grid.upper
+    kinds, params = model.bodies.kinds, model.bodies.params
     normal = np.empty(3)
     m = 0
-    for p in range(candidates.shape[0]):
+    for c in range(points.shape[0]):
         if m == room:
             break
-        x, y, z = candidates[p, 0], candidates[p, 1], candidates[p, 2]
+        x, y, z = points[c, 0], points[c, 1], points[c, 2]
         if not (lower[0] <= x < upper[0] and lower[1] <= y < upper[1] and lower[2] <= z < upper[2]):
             continue
         if kinds.shape[0] and union_distance_point(kinds, params, x, y, z, normal) < 0.0:
             continue
-        positions[n + m, 0], positions[n + m, 1], positions[n + m, 2] = x, y, z
-        sources[n + m] = candidate_sources[p]
-        ages[n + m] = 0.0
-        durations[m] = candidate_durations[p]
+        q = n + m
+        particles.positions[q, 0], particles.positions[q, 1], particles.positions[q, 2] = x, y, z
+        particles.sources[q] = candidate_sources[c]
+        particles.ages[q] = 0.0
+        durations[m] = candidate_durations[c]
         m += 1
     return m
