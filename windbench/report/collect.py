@@ -1,45 +1,33 @@
 """Run folders -> run records -> one combined dataset with the swept settings as dimensions.
 
-Every ``windbench.nc`` under the given folders is opened lazily (xarray + netCDF4): only the
-per-step figures and the lee probe values are read, so a sweep of thousands of runs need not
-fit in memory. Each file becomes one :class:`RunRecord` with a status:
+Every ``windbench.nc`` under the given folders is opened lazily (xarray + netCDF4): only
+the per-step figures and the probe values are read. Each file becomes one
+:class:`RunRecord` with a status:
 
-- ``complete``  — ``status = complete`` and every planned step recorded; enters the combination;
-- ``failed``    — the run stopped (``status = failed``); kept in the summary with its ``failure``;
-- ``partial``   — readable but incomplete (fewer steps than planned, unknown status, or a
-  variable of DESIGN.md's run dataset missing);
-- ``unreadable``— netCDF cannot open it (truncated, corrupted) or a checksum does not match
-  (every chunk of every variable is read back first, :func:`windbench.dataset.verify`:
-  the reason then starts with ``checksum``); its settings are taken from the Hydra
-  ``.hydra/config.yaml`` beside it when there is one;
-- ``invalid``   — no dataset, but the run's ``run_status.yaml`` (windbench.sweep) says the
-  config was refused before any work; the reason is kept.
+- ``complete``: ``status = complete``, every planned step recorded and a steady window;
+- ``unsettled``: complete, but no recorded step after the steady window's start
+  (:func:`windbench.metrics.unsettled_reason`);
+- ``failed``: the run stopped (``status = failed``), with its ``failure``;
+- ``partial``: readable but incomplete (fewer steps than planned, unknown status, or a
+  required variable missing);
+- ``unreadable``: netCDF cannot open it or a checksum does not match
+  (:func:`windbench.dataset.verify`; the reason then starts with ``checksum``);
+- ``invalid``: no dataset, the run's ``run_status.yaml`` says the config was refused.
 
-Only ``complete`` runs are combined; the others are listed as skipped with the reason. Each
-record keeps the code version that made it (:func:`windbench.dataset.code_version`):
-:func:`code_versions` lists them, and the report warns when a sweep mixes several.
+Only ``complete`` runs are combined; the others are listed with the reason. Each record
+keeps the code version that made it (:func:`code_versions`; the report warns when a sweep
+mixes several).
 
-Figures per run (DESIGN.md "Run dataset"):
-
-- ``lee_speed_ratio``, ``lee_force_ratio``, ``divergence_rms``: mean over the run's steady
-  window, t >= its ``analysis_start`` attribute (two flow-through times of the domain,
-  :func:`windbench.simulate.analysis_window`; older datasets without it: the second half of
-  the recorded time); ``*_final`` is the value at the last step; ``divergence_max`` is the
-  maximum over the window.
-- ``step_seconds_<phase>``: mean wall time per step and phase over every step but the first
-  (the first includes numba's compile or cache load); ``seconds_per_step`` = phase ``total``;
-  ``seconds_per_step_median`` its median over the steady window (robust to other processes
-  on a shared machine), ``wind_seconds_median`` the same for the wind phase alone (the
-  backend's own cost: the cost figure uses it), ``seconds_per_simulated_second`` the median
-  step over dt.
-- every other per-step variable (a backend's ``stats()``, e.g. ``live_particles`` or pressure
-  iterations): its mean over the window, like the lee figures;
-- ``lee_error`` (see :mod:`windbench.report.lee`), from the probe wind averaged over the
-  window (``probe_wind_mean``);
-- the wake profile u/u0 behind the scene's obstacle (``wake_speed_ratio``), window mean.
-
-A complete run whose recorded time holds no steady window is ``unsettled``
-(:func:`windbench.metrics.unsettled_reason`): listed with the reason, never combined.
+Figures per run, all over the steady window t >= ``analysis_start`` (two flow-through
+times, :func:`windbench.simulate.analysis_window`; older datasets: the second half):
+window means of ``lee_speed_ratio``, ``lee_force_ratio``, ``divergence_rms`` and every other
+per-step variable (a backend's ``stats()``), ``*_final`` at the last step,
+``divergence_max`` the window's maximum; ``seconds_per_step`` (mean wall time, first step
+excluded: it holds numba's compile or cache load), ``seconds_per_step_median`` and
+``wind_seconds_median`` (medians over the window, robust to other processes),
+``seconds_per_simulated_second`` (median step / dt); the lee probe wind averaged over the
+window (``probe_wind_mean``, for :mod:`windbench.report.lee`) and the window-mean wake
+profile u/u0 (``wake_speed_ratio``).
 """
 
 from __future__ import annotations

@@ -78,7 +78,7 @@ def reference_table(refs: dict[str, Reference]) -> pd.DataFrame:
                 "scene": scene,
                 "reference": ref.run.label,
                 "file": display_path(ref.path),
-                "scheme": ref.run.config.get("wind.advection", "?"),
+                "scheme": ref.run.config.get("wind.advection"),
                 "levels": ", ".join(str(r.settings.get("resolution")) for r in ref.levels),
                 "e21": ref.difference,
                 "order p": ref.order,

@@ -350,12 +350,12 @@ def regenerate(records: Sequence[RunRecord], inputs: Sequence, out, reference=No
         folders = reference if isinstance(reference, list | tuple) else [reference]
         args += " --reference " + " ".join(display_path(Path(f)) for f in folders)
     report = f"windbench-report {args} --out {display_path(Path(out))}"
-    if len(experiments) != 1:
+    if not experiments:
         return f"Regenerate: `{report}`."
-    name = experiments.pop()
-    if len(inputs) > 1 or reference:  # several sweeps: the experiment file lists them
-        return f"Regenerate: the sweeps listed in `conf/experiment/{name}.yaml`, then `{report}`."
-    return f"Regenerate: `windbench -m experiment={name} && {report}`."
+    sweeps = " && ".join(f"windbench -m experiment={e}" for e in sorted(experiments))
+    if reference:  # the references' sweeps: listed beside the experiments'
+        return f"Regenerate: `{sweeps}`, the reference sweeps (`conf/experiment/reference.yaml`), then `{report}`."
+    return f"Regenerate: `{sweeps} && {report}`."
 
 
 def _figure(width: float, height: float) -> Figure:

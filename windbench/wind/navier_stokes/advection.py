@@ -244,12 +244,14 @@ def _backtrace_plane(u, v, w, ci, cells, periodic, dt_h, out):
 
 
 @njit(cache=True, inline="always")
-def _carry_row(q, a, I, J, lo, hi, Jm, cells, periodic, out, qmin, qmax, bounds):
+def _carry_row(q, a, I, J, lo, hi, Jm, cells, periodic, dst, bounds):
     """out[I, J, K] = q(x - d) along row (I, J) of component a's faces (padded indices;
     face (I, J, K) separates the padded cells (I, J, K) - e_a and (I, J, K)): d the mean
     of the two cells' displacements, read from the planes ``lo`` (row Jm, K - 1 for
     a = 2) and ``hi`` (row J). Positions in cell coordinates (world = lower + h x); a
-    backtraced point is kept inside (:func:`_keep_inside`) and interpolated trilinearly."""
+    backtraced point is kept inside (:func:`_keep_inside`) and interpolated trilinearly.
+    ``dst`` = (out, qmin, qmax): the result and, with ``bounds``, the limiter's bounds."""
+    out, qmin, qmax = dst
     P0, P1, P2 = q.shape
     n0, n1, n2 = cells[0], cells[1], cells[2]
     s0 = -1.0 if a == 0 else -0.5
@@ -281,7 +283,7 @@ def _carry_plane(q, a, I, lo, hi, cells, periodic, out, qmin, qmax, bounds):
     1) separates the cells of rows J - 1 and J of one plane, the others cells of one row."""
     e1 = int(a == 1)
     for J in range(1, q.shape[1] - 1):
-        _carry_row(q, a, I, J, lo, hi, J - e1, cells, periodic, out, qmin, qmax, bounds)
+        _carry_row(q, a, I, J, lo, hi, J - e1, cells, periodic, (out, qmin, qmax), bounds)
 
 
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)

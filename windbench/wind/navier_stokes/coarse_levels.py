@@ -22,6 +22,8 @@ written out with numpy).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -89,11 +91,13 @@ def prolong(x, parent, first, count):
 
 
 @njit(cache=True)
-def run_cycle(ops, x, b, nb, w, diag, inv, parent, order, ranges, blocks, mean, sweeps, omega):
+def run_cycle(ops, x, b, tables, sweeps, omega):
     """Run the schedule ``ops`` (rows (operation, level)): PRE = ``sweeps[0]`` sweeps, the
     residual restricted to the next level; POST = the correction prolonged from the next
     level, ``sweeps[0]`` sweeps in reverse order; COARSEST = ``sweeps[1]`` sweeps each way.
-    ``blocks[l]`` = (first cell, cell count) of level l."""
+    ``tables`` are the levels' :class:`CellTables`; ``blocks[l]`` = (first cell, cell count)
+    of level l."""
+    nb, w, diag, inv, parent, order, ranges, blocks, mean = tables
     for n in range(ops.shape[0]):
         op, lev = ops[n, 0], ops[n, 1]
         if op == PRE:
@@ -108,6 +112,22 @@ def run_cycle(ops, x, b, nb, w, diag, inv, parent, order, ranges, blocks, mean, 
         else:
             _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[1], False, omega)
             _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[1], True, omega)
+
+
+class CellTables(NamedTuple):
+    """The flat per-cell tables of the small levels (see module docstring): neighbour
+    indices, face weights, diagonal and its inverse, parent cell, the cells of each colour
+    in order and their ranges, each level's block of cells and its mean flag."""
+
+    nb: np.ndarray
+    w: np.ndarray
+    diag: np.ndarray
+    inv: np.ndarray
+    parent: np.ndarray
+    order: np.ndarray
+    ranges: np.ndarray
+    blocks: np.ndarray
+    mean: np.ndarray
 
 
 def schedule(first: int, last: int, w_levels) -> np.ndarray:
@@ -219,7 +239,8 @@ class CoarseLevels:
 
     def cycle(self):
         """One cycle from the first of these levels, from its current x."""
-        run_cycle(
-            self.ops, self.x, self.b, self.nb, self.w, self.diag, self.inv, self.parent,
-            self.order, self.ranges, self.blocks, self.mean, self.sweeps, self.omega,
+        tables = CellTables(
+            self.nb, self.w, self.diag, self.inv, self.parent, self.order, self.ranges,
+            self.blocks, self.mean,
         )  # fmt: skip
+        run_cycle(self.ops, self.x, self.b, tables, self.sweeps, self.omega)

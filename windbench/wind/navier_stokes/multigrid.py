@@ -34,6 +34,8 @@ warm-started from the previous step's psi.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit, prange
 
@@ -191,10 +193,11 @@ def classify_rows(wx, wy, wz, coef, periodic, rows, row_coef, ends):
 
 
 @njit(cache=True)
-def _operator_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out, residual):
+def _operator_plane(x, b, level, i, out, residual):
     """out = (b - A x)[i] if ``residual``, else (A x)[i] (b unread); ``out`` is a plane (a
-    view of the output's plane i, or scratch). Each row class in a loop of its own (see
-    :func:`_gs_plane`)."""
+    view of the output's plane i, or scratch); ``level`` the level's :class:`Stencil`.
+    Each row class in a loop of its own (see :func:`_gs_plane`)."""
+    wx, wy, wz, periodic, rows, row_coef, ends, coef = level
     sign = 1.0 if residual else -1.0
     c0, c1, c2 = coef[0], coef[1], coef[2]
     d_uniform = 2.0 * (c0 + c1 + c2)
@@ -243,33 +246,34 @@ def _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, i, j, residual):
 
 
 @njit(cache=True, parallel=True)
-def residual(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
+def residual(x, b, level, out):
     """out = b - A x; returns out . out, summed as :func:`dot` does (in the same pass)."""
     partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        _operator_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], True)
+        _operator_plane(x, b, level, i, out[i], True)
         partial[i] = _plane_dot(out, out, i)
     return ordered_sum(partial)
 
 
 @njit(cache=True, parallel=True)
-def apply_operator(x, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
+def apply_operator(x, level, out):
     """out = A x = sum_f c w_f (x_c - x_nb); returns x . A x, summed as :func:`dot` does
     (plane by plane while the plane is in cache: one pass less per CG iteration)."""
     partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        _operator_plane(x, x, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], False)
+        _operator_plane(x, x, level, i, out[i], False)
         partial[i] = _plane_dot(x, out, i)
     return ordered_sum(partial)
 
 
 @njit(cache=True, fastmath=FAST_MATH)
-def _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, colour):
+def _gs_plane(x, b, level, i, colour):
     """One colour of plane i. Cells of one colour do not neighbour each other, so the
     order within a colour does not matter: each row class in a loop of its own (with the
     other rows' code in the same loop the ALL_OPEN rows ran twice as slow), ALL_OPEN in
     functions of their own. The stores are written out in the loops: an inlined helper
     that stores into an array made the loop three to four times slower (numba 0.68)."""
+    wx, wy, wz, periodic, rows, row_coef, ends, coef = level
     if coef[6] == 1.0:
         _constant_rows_gauss_seidel(x, b, rows, ends, coef, i, colour)
     else:
@@ -361,9 +365,7 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
 
 
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)
-def gauss_seidel(
-    x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, colour, halves, r, partial
-):
+def gauss_seidel(x, b, level, colour, halves, r, partial):
     """``halves`` half sweeps of red-black SOR (the level's omega, coef[6]) on A x = b,
     alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first), planes
     in parallel: a cycle's smoothing on one level is one call (the Python loop of one call per half
@@ -378,24 +380,25 @@ def gauss_seidel(
     without a pass of its own (0.13 ms per iteration at 64^3).
     """
     nx = x.shape[0]
+    periodic = level[3]
     last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
     with_dot = partial.shape[0] == nx
     for half in range(halves):
         c = (colour + half) % 2
         final = with_dot and half == halves - 1
         for i in prange(last):
-            _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
+            _gs_plane(x, b, level, i, c)
             if final:
                 partial[i] = _plane_dot(r, x, i)
         for i in range(last, nx):
-            _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
+            _gs_plane(x, b, level, i, c)
             if final:
                 partial[i] = _plane_dot(r, x, i)
     return ordered_sum(partial) if with_dot else 0.0
 
 
 @njit(cache=True, parallel=True)
-def residual_restrict(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, ratio, coarse):
+def residual_restrict(x, b, level, ratio, coarse):
     """coarse[I,J,K] = mean of the residual b - A x over the fine cells it covers (ratio 1
     or 2 per axis). The residual of the fine planes under one coarse plane goes to a
     scratch block and straight into the mean: it is never stored as a whole field (a
@@ -406,9 +409,7 @@ def residual_restrict(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, ra
     for I in prange(n0):
         fine = np.empty((r0, x.shape[1], x.shape[2]), x.dtype)
         for a in range(r0):
-            _operator_plane(
-                x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, r0 * I + a, fine[a], True
-            )
+            _operator_plane(x, b, level, r0 * I + a, fine[a], True)
         for J in range(n1):
             coarse[I, J, :] = 0.0
             for a in range(r0):
@@ -549,6 +550,21 @@ def remove_mean(x, active):
             x.flat[idx] -= mean
 
 
+class Stencil(NamedTuple):
+    """What the operator and smoother kernels read of a level: face weights per axis, the
+    periodic flags, each row's class and coefficients, the end cells' table, and the
+    per-axis coefficients with the smoother's factors (:class:`_Level`)."""
+
+    wx: np.ndarray
+    wy: np.ndarray
+    wz: np.ndarray
+    periodic: np.ndarray
+    rows: np.ndarray
+    row_coef: np.ndarray
+    ends: np.ndarray
+    coef: np.ndarray
+
+
 class _Level:
     """One multigrid level: face weights, coefficient per axis, work arrays."""
 
@@ -577,9 +593,11 @@ class _Level:
         self.small = np.prod(self.shape) < SERIAL_CELLS
         self.partial = np.zeros(nx)  # per-plane sums of the smoother's dot
 
-    def args(self):
-        w, p = self.w, self.periodic
-        return (w[0], w[1], w[2], p, self.rows, self.row_coef, self.ends, self.coef)
+    def args(self) -> Stencil:
+        w = self.w
+        return Stencil(
+            w[0], w[1], w[2], self.periodic, self.rows, self.row_coef, self.ends, self.coef
+        )
 
     def classify_rows(self):
         """After the weights change: the rows whose interior cells have every face open, and
@@ -590,7 +608,7 @@ class _Level:
         """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call); with
         ``r`` (float64, the level's shape) returns r . x after them (:func:`gauss_seidel`)."""
         r, partial = NO_DOT if r is None else (r, self.partial)
-        return gauss_seidel(x, b, *self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
+        return gauss_seidel(x, b, self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
 
 
 class MultigridPoisson:
@@ -696,7 +714,7 @@ class MultigridPoisson:
         lev = self.levels[n]
         nxt = self.levels[n + 1]
         lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
-        residual_restrict(lev.x, lev.b, *lev.args(), lev.ratio, nxt.b)
+        residual_restrict(lev.x, lev.b, lev.args(), lev.ratio, nxt.b)
         nxt.x[...] = 0.0
         for _ in range(2 if n in W_LEVELS else 1):
             self._cycle(n + 1)
@@ -713,7 +731,7 @@ class MultigridPoisson:
         bnorm = np.sqrt(dot(b, b))
         self.rhs_norm = float(bnorm)
         r, p, q = self.r, self.p, self.q
-        rnorm = np.sqrt(residual(x, b, *fine.args(), r))
+        rnorm = np.sqrt(residual(x, b, fine.args(), r))
         if bnorm == 0.0 or bnorm <= atol:
             x[...] = 0.0
             return 0, 0.0
@@ -724,7 +742,7 @@ class MultigridPoisson:
         it = 0
         while it < max_iterations:
             it += 1
-            alpha = rz / apply_operator(p, *fine.args(), q)  # p . A p
+            alpha = rz / apply_operator(p, fine.args(), q)  # p . A p
             rnorm = np.sqrt(cg_update(alpha, p, q, x, r, fine.b))
             if rnorm <= tol * bnorm:
                 break
