@@ -52,6 +52,7 @@ VARIABLES: dict[str, tuple[str, str | None]] = {
     "phase": ("phase of the step", None),
     "probe_box": ("probe box of the lattice point", None),
     "wake_distance": ("distance behind the obstacle's lee face / its height H", "1"),
+    "frame_time": ("simulated time of the animation frame", "s"),
     "wake_height": ("height above the ground / the obstacle's height H", "1"),
     "wind": ("cell-centred wind velocity", "m s-1"),
     "cloth_position": ("cloth vertex position", "m"),
@@ -211,10 +212,9 @@ def _frames(ds: xr.Dataset, setup: RunSetup, rec: Recorder) -> xr.Dataset:
     """The animation frames (``output.frames``) along ``frame`` (coordinate ``frame_time``)."""
     if not rec.frame_times:
         return ds
-    ds = ds.assign_coords(frame_time=("frame", np.asarray(rec.frame_times), {"units": "s"}))
+    ds = ds.assign_coords(frame_time=("frame", np.asarray(rec.frame_times)))
     for name, values in rec.frame_data.items():
-        dims, long_name, units = FRAME_VARIABLES[name]
-        ds[name] = (("frame", *dims), np.asarray(values), {"long_name": long_name, "units": units})
+        ds[name] = (("frame", *FRAME_VARIABLES[name][0]), np.asarray(values))
     # the slice's height (m) as an attribute: a scalar variable cannot carry a checksum
     ds["slice_wind"].attrs["slice_z"] = float(setup.frames.height)
     return ds
@@ -298,7 +298,8 @@ def annotate(ds: xr.Dataset, extra_units: Mapping[str, tuple[str, str]] | None =
     """Attach long_name and units (:data:`VARIABLES` and ``extra_units``, e.g. a backend's
     ``stats_units``), axis to x/y/z and ``Conventions``; warn about a variable neither
     table knows (its figures would have no units)."""
-    table = {**VARIABLES, **(extra_units or {})}
+    frames = {name: (long_name, units) for name, (_, long_name, units) in FRAME_VARIABLES.items()}
+    table = {**VARIABLES, **frames, **(extra_units or {})}
     for name in ds.variables:
         if name not in table:
             log.warning(

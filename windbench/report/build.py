@@ -182,6 +182,7 @@ def build_report(
     name = sweep_name(records, inputs)
     out = Path(out) if out else Path("reports") / name
     summary = _write_data(records, refs, out, name)
+    C.reference_table(refs).to_csv(out / "references.csv", index=False)
     report = Report(out, records, summary, refs)
     regenerate = F.regenerate(records, inputs, out, reference)
     place = _placer(report, out / "figures", regenerate)

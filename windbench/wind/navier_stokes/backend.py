@@ -7,8 +7,8 @@ One step of ``dt``, each operator in its own module:
 1. cloth coupling, "prior to any other operation" (:mod:`.coupling`, ``wind.coupling``);
 2. forces (:mod:`.forcing`): ``wind.body_force`` and the interior flow primitives; a
    source or sink also emits its volume as a divergence target of the projection;
-3. eddy viscosity of the mean flow, ``wind.turbulence`` (:mod:`.turbulence`): Prandtl's
-   mixing length over the ground (default), Smagorinsky's subgrid model, or none;
+3. eddy viscosity of the mean flow, ``wind.turbulence`` (:mod:`.turbulence`): the surface
+   layer's K-theory of the sources' profile (default), Smagorinsky's subgrid model, or none;
 4. advection (:mod:`.advection`) and viscosity (:mod:`.diffusion`), ``wind.advection``:
    ``semi_lagrangian`` (the paper's scheme: RK2 backtrace, trilinear interpolation) or
    limited ``maccormack``, each followed by implicit (backward Euler) viscosity — first
@@ -98,7 +98,7 @@ class NavierStokesConfig(WindConfig):
     body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
     turbulence: str = "mixing_length"  # none | smagorinsky | mixing_length (eddy viscosity)
     smagorinsky_constant: float = 0.17  # C_s of nu_t = (C_s h)^2 |S|
-    mixing_length_limit: float = 10.0  # m, lambda of Blackadar's 1/l = 1/(kappa z) + 1/lambda
+    mixing_length_limit: float = 40.0  # m, lambda of Blackadar's 1/l = 1/(kappa z) + 1/lambda
     seed: int = 0  # synthetic inflow turbulence (conf/wind/navier_stokes.yaml sets ${seed})
 
 
@@ -221,11 +221,10 @@ class NavierStokesWind(WindField):
         self._set_weights()
         self.psi = np.zeros(shape)
         self.rhs = np.zeros(shape)
-        self.nu_t = np.zeros(shape) if self.turbulence != "none" else None
-        self.length2 = turbulence.mixing_lengths(
-            self.turbulence, shape, self.h, float(params.smagorinsky_constant),
-            float(params.mixing_length_limit),
-        )  # fmt: skip
+        self.smagorinsky_length2 = np.full(
+            shape[2], (float(params.smagorinsky_constant) * self.h) ** 2
+        )
+        self.nu_t = self._eddy_viscosity_model(float(params.mixing_length_limit))
         self._u_cell = np.zeros((*shape, 3))
         self._cell_valid = False
         self._stats: dict[str, float] = {}
@@ -405,12 +404,39 @@ class NavierStokesWind(WindField):
         self._last_dt = dt
         return sweeps
 
+    def _eddy_viscosity_model(self, limit: float) -> np.ndarray | None:
+        """nu_t per cell: fixed for ``mixing_length`` (the undisturbed wind's shear at each
+        layer, :func:`.turbulence.surface_layer_viscosity`), updated every step for
+        ``smagorinsky``, None without turbulence or where the wind has no shear."""
+        if self.turbulence == "none":
+            return None
+        if self.turbulence == "smagorinsky":
+            return np.zeros(self.grid.shape)
+        z = self.grid.axes()[2] - self.lower[2]
+        eps = 1e-3 * self.h
+        column = np.zeros((len(z), 3))
+        column[:, 2] = self.grid.axes()[2]
+        column[:, :2] = 0.5 * (self.lower[:2] + np.asarray(self.grid.upper)[:2])
+        up, down = column.copy(), column.copy()
+        up[:, 2] += eps
+        down[:, 2] -= eps
+        shear = np.linalg.norm(
+            superpose(self.scene.sources, up) - superpose(self.scene.sources, down), axis=1
+        ) / (2 * eps)
+        layers = turbulence.surface_layer_viscosity(z, shear, limit)
+        if not np.any(layers > 0):
+            return None
+        return np.where(self.solid.astype(bool), 0.0, layers[None, None, :])
+
     def _eddy_diffusion(self, dt) -> tuple[float, int]:
         """Eddy viscosity of the mean flow (:mod:`.turbulence`), explicit substeps;
         returns (largest nu_t in m^2/s, substeps taken)."""
         if self.nu_t is None:
             return 0.0, 0
-        turbulence.eddy_viscosity(*self.q, self.solid, self.axes, self.h, self.length2, self.nu_t)
+        if self.turbulence == "smagorinsky":
+            turbulence.eddy_viscosity(
+                *self.q, self.solid, self.axes, self.h, self.smagorinsky_length2, self.nu_t
+            )
         peak = float(self.nu_t.max())
         stable = turbulence.SUBSTEP_LIMIT / (2 * int(self.axes.sum()))
         substeps = max(1, int(np.ceil(peak * dt / self.h**2 / stable)))

@@ -1,25 +1,21 @@
-"""Eddy viscosity (``wind.turbulence``): turbulent eddies mix momentum like a viscosity
-that grows with the strain of the mean flow,
+"""Eddy viscosity (``wind.turbulence``): turbulent eddies mix momentum like a viscosity,
+du/dt = div(nu_t grad u) (the transpose part div(nu_t grad u^T), zero for uniform nu_t, is
+left out), in one of two closures:
 
-    nu_t = l^2 |S|,   |S| = sqrt(2 S_ij S_ij),   S_ij = (d_i u_j + d_j u_i) / 2,
+- ``mixing_length``: the atmospheric surface layer's K-theory, nu_t(z) = l(z)^2 |dU/dz|
+  with U(z) the undisturbed wind of the scene's sources and Prandtl's mixing length
+  l = kappa z over the ground, limited aloft as 1/l = 1/(kappa z) + 1/lambda (Blackadar
+  1962; lambda = ``wind.mixing_length_limit``). Over a log-law profile this is the
+  equilibrium K = kappa u_* z; it is fixed in time, a Reynolds-averaged closure whose wind
+  is the time mean of the turbulent one (the "K = K_0" scheme that Wilson 1985 found
+  nearly as good as second-order closures behind a windbreak). A wind without shear
+  (uniform sources) has none.
+- ``smagorinsky``: nu_t = (C_s h)^2 |S|, |S| = sqrt(2 S_ij S_ij), the resolved strain's
+  subgrid eddies (Smagorinsky 1963; C_s = ``wind.smagorinsky_constant``, Lilly 1967),
+  vanishing as the grid is refined; strain rates on the MAC grid at cell centres.
 
-with the mixing length l of one of two closures:
-
-- ``smagorinsky``: l = C_s h, the eddies smaller than a cell (Smagorinsky 1963; C_s =
-  ``wind.smagorinsky_constant``, about 0.17 for isotropic turbulence, Lilly 1967): a
-  subgrid model that vanishes as the grid is refined;
-- ``mixing_length``: Prandtl's l = kappa z near the ground (z the height above the domain's
-  lowest face), limited aloft as 1/l = 1/(kappa z) + 1/lambda (Blackadar 1962; lambda =
-  ``wind.mixing_length_limit``): the turbulence of the atmospheric surface layer, a
-  Reynolds-averaged closure whose wind is the time mean of the turbulent one.
-
-The term du/dt = div(nu_t grad u) (the transpose part div(nu_t grad u^T), zero for uniform
-nu_t, is left out) is taken explicitly, in as many equal substeps as keep
-nu_t dt / h^2 <= SUBSTEP_LIMIT / (2 d) (d active axes): stable at any nu_t.
-
-Strain rates on the MAC grid at cell centres: diagonal terms from the cell's two faces,
-off-diagonal terms from central differences of cell-centred components (the ghost layer
-supplies the boundary values); solid cells have nu_t = 0.
+The term is taken explicitly, in as many equal substeps as keep nu_t dt / h^2 <=
+SUBSTEP_LIMIT / (2 d) (d active axes): stable at any nu_t. Solid cells have nu_t = 0.
 """
 
 from __future__ import annotations
@@ -45,13 +41,15 @@ def _centre(q, a, i, j, k):
 SUBSTEP_LIMIT = 0.9
 
 
-def mixing_lengths(mode: str, shape, h: float, constant: float, limit: float) -> np.ndarray:
-    """l^2 per cell layer along z (m^2) of the closure ``mode`` (module docstring)."""
-    if mode == "smagorinsky":
-        return np.full(shape[2], (constant * h) ** 2)
-    z = (np.arange(shape[2]) + 0.5) * h
-    length = 1.0 / (1.0 / (KARMAN * z) + 1.0 / limit)
-    return length**2
+def blackadar_length(z, limit: float) -> np.ndarray:
+    """l = 1 / (1 / (kappa z) + 1 / lambda) (m) at heights ``z`` above the ground."""
+    z = np.asarray(z, dtype=float)
+    return 1.0 / (1.0 / (KARMAN * z) + 1.0 / limit)
+
+
+def surface_layer_viscosity(z, shear, limit: float) -> np.ndarray:
+    """K(z) = l(z)^2 |dU/dz| (m^2/s) from the undisturbed wind's shear (1/s) at ``z``."""
+    return blackadar_length(z, limit) ** 2 * np.abs(shear)
 
 
 KARMAN = 0.41  # von Karman's constant
@@ -59,8 +57,9 @@ KARMAN = 0.41  # von Karman's constant
 
 @njit(cache=True, parallel=True)
 def eddy_viscosity(u, v, w, solid, axes, h, length2, out):
-    """out = l^2 |S| per cell (m^2/s), l^2 = ``length2[k]`` of the cell's layer, 0 in
-    solids. Derivatives along an inactive axis (``axes[b] = 0``) are zero."""
+    """out = l^2 |S| per cell (m^2/s), l^2 = ``length2[k]`` of the cell's layer (the
+    Smagorinsky closure: (C_s h)^2), 0 in solids. Derivatives along an inactive axis
+    (``axes[b] = 0``) are zero."""
     nx, ny, nz = solid.shape
     for i in prange(nx):
         for j in range(ny):
