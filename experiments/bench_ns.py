@@ -51,13 +51,14 @@ def array_bytes(obj) -> int:
     return total
 
 
-def bench(resolution: int, steps: int, advection: str) -> dict:
+def bench(resolution: int, steps: int, advection: str, turbulence: str | None) -> dict:
     cfg = compose_config(
         [
             "experiment=scaling",  # scene=fence in a cube: resolution r gives r^3 cells
             "wind=navier_stokes",
             f"grid.resolution={resolution}",
             f"wind.advection={advection}",
+            *([f"wind.turbulence={turbulence}"] if turbulence else []),
         ]
     )
     setup = prepare(cfg)
@@ -87,9 +88,11 @@ def bench(resolution: int, steps: int, advection: str) -> dict:
         "shape": "x".join(map(str, setup.grid.shape)),
         "cells": cells,
         "advection": advection,
+        "turbulence": str(cfg.wind.turbulence),
         "step_seconds": df.step.median(),
         "advect_seconds": df.advect_seconds.median(),
         "diffuse_seconds": df.diffuse_seconds.median(),
+        "eddy_seconds": df.eddy_seconds.median(),
         "project_seconds": df.project_seconds.median(),
         "pressure_iterations": df.pressure_iterations.median(),
         "pressure_iterations_max": df.pressure_iterations.max(),
@@ -108,11 +111,12 @@ def main():
     ap.add_argument("--resolutions", type=int, nargs="+", default=[16, 32, 64, 128])
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--advection", default="semi_lagrangian")
+    ap.add_argument("--turbulence", default=None, help="wind.turbulence (default: the config's)")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args()
     rows = []
     for res in args.resolutions:
-        row = bench(res, args.steps, args.advection)
+        row = bench(res, args.steps, args.advection, args.turbulence)
         print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()}, flush=True)
         rows.append(row)
     df = pd.DataFrame(rows)

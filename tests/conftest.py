@@ -19,7 +19,7 @@ def run_config(tmp_path):
     import xarray as xr
 
     def _run(overrides, name="run"):
-        cfg = compose_config(["sim.progress=false", *overrides])
+        cfg = compose_config(["sim.progress=false", "sim.spinup=0", *overrides])
         result = run(cfg, tmp_path / name)
         with xr.open_dataset(result.path) as ds:
             return result, ds.load()

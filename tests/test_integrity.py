@@ -34,10 +34,15 @@ def tiny_run(tmp_path_factory):
 
 
 def corrupt_middle(path, n=4096, seed=0):
-    """Overwrite ``n`` bytes in the middle of the file with random bytes."""
-    size = path.stat().st_size
+    """Overwrite ``n`` bytes in the middle of the file's largest variable (the wind
+    snapshots, stored as they are: found by their own bytes) with random bytes."""
+    with netCDF4.Dataset(path) as nc:
+        data = np.ascontiguousarray(nc.variables["wind"][:], dtype="<f8").tobytes()
+    raw = path.read_bytes()
+    start = raw.find(data[len(data) // 2 : len(data) // 2 + 64])
+    assert start > 0 and len(data) > 2 * n, "the wind data must be stored contiguously"
     with open(path, "r+b") as fh:
-        fh.seek(size // 2)
+        fh.seek(start)
         fh.write(np.random.default_rng(seed).bytes(n))
 
 

@@ -16,7 +16,13 @@ from windbench.cli import compose_config
 from windbench.errors import ConfigError
 from windbench.simulate import prepare
 
-SWEEP = ["scene=empty", "grid.resolution=8", "sim.duration=0.05", "sim.fail_at_step=97,98,99,2"]
+SWEEP = [
+    "scene=empty",
+    "grid.resolution=8",
+    "sim.spinup=0",
+    "sim.duration=0.05",
+    "sim.fail_at_step=97,98,99,2",
+]
 
 
 def statuses(sweep_dir):
@@ -55,7 +61,7 @@ def test_joblib_launcher_runs_the_sweep_in_parallel(cli, tmp_path):
         "-m",
         "hydra/launcher=joblib",
         "hydra.launcher.n_jobs=2",
-        "scene=empty,fence",
+        "scene=empty,flag",
         "grid.resolution=16",
         "sim.duration=0.05",
         f"hydra.sweep.dir={sweep}",
@@ -121,7 +127,7 @@ def test_sigkill_during_a_write_leaves_no_corrupt_dataset(tmp_path, delay):
         ),
         (["sim.dt=5", "sim.duration=10"], r"sim.dt: 5.0 s lets the wind .* cross the whole domain"),
         (
-            ["scene=fence", "scene.bodies.0.min=[9,0,0]", "scene.bodies.0.max=[10,4,2]"],
+            ["scene=fence", "scene.bodies.0.min=[50,0,0]", "scene.bodies.0.max=[51,4,2]"],
             r"scene.bodies\[0\]: body lies entirely outside the domain",
         ),
         (["sim.duration=-1"], "sim.duration: must be > 0 s"),
@@ -134,12 +140,12 @@ def test_validation_refuses_before_work(overrides, message):
 
 def test_cfl_above_the_backend_range_warns(caplog):
     cfg = compose_config(
-        ["wind=navier_stokes", "scene=fence", "grid.resolution=16", "sim.dt=0.5", "sim.duration=1"]
+        ["wind=navier_stokes", "scene=flag", "grid.resolution=16", "sim.dt=0.5", "sim.duration=1"]
     )
     with caplog.at_level("WARNING", logger="windbench"):
         setup = prepare(cfg)
-    assert setup.cfl == pytest.approx(6.0)
-    assert "CFL number 6 exceeds 5, the stable range of backend navier_stokes" in caplog.text
+    assert setup.cfl == pytest.approx(8.0)  # 6 m/s x 0.5 s / (6 m / 16)
+    assert "CFL number 8 exceeds 5, the stable range of backend navier_stokes" in caplog.text
 
 
 def test_still_air_has_cfl_zero():

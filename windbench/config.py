@@ -81,6 +81,7 @@ class SceneConfig:
     probes: dict[str, ProbeBoxConfig] = field(default_factory=dict)
     lee_force: LeeForceConfig | None = None
     reference_speed: float | None = None
+    wake: Any = None  # wake profiles behind an obstacle (windbench.scenes.WakeProbe)
 
 
 @dataclass
@@ -91,7 +92,10 @@ class GridConfig:
 @dataclass
 class SimConfig:
     dt: float = setting(1.0 / 60.0, "s", "time step", gt=0)
-    duration: float = setting(1.0, "s", "simulated time", gt=0)
+    spinup: Any = setting(
+        "auto", "s", "simulated before recording starts; auto: two flow-through times"
+    )
+    duration: float = setting(1.0, "s", "simulated time recorded after the spin-up", gt=0)
     max_steps: int = setting(
         100_000, "1", "largest step count (sim.duration / sim.dt) accepted", ge=1
     )

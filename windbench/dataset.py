@@ -51,15 +51,23 @@ VARIABLES: dict[str, tuple[str, str | None]] = {
     "cloth": ("cloth name", None),
     "phase": ("phase of the step", None),
     "probe_box": ("probe box of the lattice point", None),
+    "wake_distance": ("distance behind the obstacle's lee face / its height H", "1"),
+    "frame_time": ("simulated time of the animation frame", "s"),
+    "wake_height": ("height above the ground / the obstacle's height H", "1"),
     "wind": ("cell-centred wind velocity", "m s-1"),
     "cloth_position": ("cloth vertex position", "m"),
     "aero_force": ("total aerodynamic force on each cloth (paper section 3)", "N"),
     "divergence_rms": ("RMS of |div u| h / U_ref over interior air cells", "1"),
     "divergence_max": ("max of |div u| h / U_ref over interior air cells", "1"),
     "lee_speed_ratio": ("mean |u| in the lee box / mean |u| in the free-stream box", "1"),
+    "wake_speed_ratio": (
+        "u / u0 along the wind behind the scene's obstacle (u0: the undisturbed wind there)",
+        "1",
+    ),
     "lee_force_ratio": ("|F| on the sheltered cloth / |F| on the exposed cloth", "1"),
     "step_seconds": ("wall time per step and phase", "s"),
     "probe_wind": ("wind at the probe lattice points", "m s-1"),
+    "probe_wind_mean": ("wind at the probe lattice points, mean over the steady window", "m s-1"),
     "probe_points": ("probe lattice point positions", "m"),
     "cloth_triangles": ("cloth triangle vertex ids", "1"),
     "vertex_cloth": ("index of the cloth each vertex belongs to", "1"),
@@ -171,8 +179,9 @@ def run_dataset(setup: RunSetup, rec: Recorder, status: str, failure: str = "") 
     ds["cloth_triangles"] = (("triangle", "corner"), setup.cloth.triangles)
     ds["vertex_cloth"] = (("vertex",), setup.cloth.vertex_cloth)
     for key, values in rec.rows.items():
-        if key not in ("step_seconds", "aero_force", "cloth_position"):
+        if key not in ("step_seconds", "aero_force", "cloth_position", "wake_speed_ratio"):
             ds[key] = (("time",), np.asarray(values, dtype=float))
+    ds = _wake(ds, setup, rec)
     ds = _probes(ds, setup, rec)
     ds = _frames(ds, setup, rec)
     ds.attrs.update(_run_attrs(setup, status, failure, n))
@@ -203,10 +212,9 @@ def _frames(ds: xr.Dataset, setup: RunSetup, rec: Recorder) -> xr.Dataset:
     """The animation frames (``output.frames``) along ``frame`` (coordinate ``frame_time``)."""
     if not rec.frame_times:
         return ds
-    ds = ds.assign_coords(frame_time=("frame", np.asarray(rec.frame_times), {"units": "s"}))
+    ds = ds.assign_coords(frame_time=("frame", np.asarray(rec.frame_times)))
     for name, values in rec.frame_data.items():
-        dims, long_name, units = FRAME_VARIABLES[name]
-        ds[name] = (("frame", *dims), np.asarray(values), {"long_name": long_name, "units": units})
+        ds[name] = (("frame", *FRAME_VARIABLES[name][0]), np.asarray(values))
     # the slice's height (m) as an attribute: a scalar variable cannot carry a checksum
     ds["slice_wind"].attrs["slice_z"] = float(setup.frames.height)
     return ds
@@ -224,6 +232,22 @@ def _step_seconds(ds: xr.Dataset, rec: Recorder, n: int) -> None:
     )
 
 
+def _wake(ds: xr.Dataset, setup: RunSetup, rec: Recorder) -> xr.Dataset:
+    """``wake_speed_ratio`` (time, wake_distance, wake_height), if the scene has a probe."""
+    wake = setup.scene.wake
+    if wake is None or "wake_speed_ratio" not in rec.rows:
+        return ds
+    ds = ds.assign_coords(
+        wake_distance=("wake_distance", list(wake.distances)),
+        wake_height=("wake_height", list(wake.heights)),
+    )
+    ds["wake_speed_ratio"] = (
+        ("time", "wake_distance", "wake_height"),
+        np.asarray(rec.rows["wake_speed_ratio"], dtype=float),
+    )
+    return ds
+
+
 def _probes(ds: xr.Dataset, setup: RunSetup, rec: Recorder) -> xr.Dataset:
     if not setup.probe_points:
         return ds
@@ -236,6 +260,9 @@ def _probes(ds: xr.Dataset, setup: RunSetup, rec: Recorder) -> xr.Dataset:
         ("snapshot", "probe_point", "component"),
         np.asarray(rec.snap_probe).reshape(len(rec.snap_probe), len(pts), 3),
     )
+    count = rec.probe_count
+    mean = rec.probe_sum / count if count else np.full((len(pts), 3), np.nan)
+    ds["probe_wind_mean"] = (("probe_point", "component"), mean)
     return ds
 
 
@@ -247,6 +274,9 @@ def _run_attrs(setup: RunSetup, status: str, failure: str, n: int) -> dict:
         resolution=int(cfg.grid.resolution),
         dt=setup.dt,
         duration=float(cfg.sim.duration),
+        spinup=setup.start_time,
+        flow_through_time=setup.flow_through_time,
+        analysis_start=setup.analysis_start,
         seed=int(cfg.seed),
         experiment=str(cfg.get("experiment") or ""),
         grid_shape=list(setup.grid.shape),
@@ -268,7 +298,8 @@ def annotate(ds: xr.Dataset, extra_units: Mapping[str, tuple[str, str]] | None =
     """Attach long_name and units (:data:`VARIABLES` and ``extra_units``, e.g. a backend's
     ``stats_units``), axis to x/y/z and ``Conventions``; warn about a variable neither
     table knows (its figures would have no units)."""
-    table = {**VARIABLES, **(extra_units or {})}
+    frames = {name: (long_name, units) for name, (_, long_name, units) in FRAME_VARIABLES.items()}
+    table = {**VARIABLES, **frames, **(extra_units or {})}
     for name in ds.variables:
         if name not in table:
             log.warning(

@@ -82,3 +82,17 @@ def speed_ratio(lee_wind: np.ndarray, free_wind: np.ndarray) -> float:
 def force_ratio(sheltered_force: np.ndarray, exposed_force: np.ndarray) -> float:
     exposed = float(np.linalg.norm(exposed_force))
     return float(np.linalg.norm(sheltered_force)) / exposed if exposed > 0 else float("nan")
+
+
+def unsettled_reason(times, analysis_start: float) -> str:
+    """Why a run's recorded ``times`` hold no steady window (no step at or after
+    ``analysis_start``); empty when they hold one."""
+    times = np.asarray(times, dtype=float)
+    if times.size and times[-1] >= analysis_start - 1e-9:
+        return ""
+    end = float(times[-1]) if times.size else 0.0
+    return (
+        f"no steady window: recorded until t = {end:.3g} s, statistics start at "
+        f"{analysis_start:.3g} s (two flow-through times; use sim.spinup=auto or a longer "
+        "sim.duration)"
+    )

@@ -38,6 +38,62 @@ class Box:
 
 
 @dataclass(frozen=True)
+class WakeProbe:
+    """Points behind an obstacle where the wake is measured: u/u0 along ``direction`` at
+    ``distances`` x H behind ``origin`` (the obstacle's lee face at ground level) and
+    ``heights`` x H above it, averaged over ``span_points`` points across the span; u0 is
+    the undisturbed wind of the scene's sources at the same point."""
+
+    origin: np.ndarray
+    direction: np.ndarray  # unit vector along the wind
+    height: float  # H, m
+    distances: tuple[float, ...]  # in H
+    heights: tuple[float, ...]  # in H
+    span: np.ndarray  # (k, 3) offsets across the wind (m)
+
+    def points(self) -> np.ndarray:
+        """``(n_distances, n_heights, k, 3)`` world points."""
+        up = np.array([0.0, 0.0, 1.0])
+        d = np.asarray(self.distances)[:, None, None, None] * self.height * self.direction
+        z = np.asarray(self.heights)[None, :, None, None] * self.height * up
+        return self.origin + d + z + self.span[None, None, :, :]
+
+
+def _wake(spec, domain: Box) -> WakeProbe:
+    key = "scene.wake"
+    allowed = {"origin", "direction", "height", "distances", "heights", "span", "span_points"}
+    unknown = set(spec) - allowed
+    if unknown:
+        raise ConfigError(key, f"unknown key(s) {sorted(unknown)}; allowed {sorted(allowed)}")
+    origin = np.asarray(list(spec["origin"]), dtype=float)
+    direction = np.asarray(list(spec.get("direction", [1.0, 0.0, 0.0])), dtype=float)
+    height = float(spec["height"])
+    if origin.shape != (3,) or direction.shape != (3,) or not np.linalg.norm(direction) > 0:
+        raise ConfigError(key, "origin and direction must be 3 numbers, direction non-zero")
+    if not height > 0:
+        raise ConfigError(f"{key}.height", f"must be > 0 m, got {height}")
+    direction = direction / np.linalg.norm(direction)
+    across = np.cross([0.0, 0.0, 1.0], direction)
+    span = float(spec.get("span", 0.0))
+    k = int(spec.get("span_points", 1))
+    if k < 1 or span < 0:
+        raise ConfigError(f"{key}.span_points", "must be >= 1 (and span >= 0 m)")
+    offsets = (np.arange(k) + 0.5) / k - 0.5 if k > 1 else np.zeros(1)
+    probe = WakeProbe(
+        origin=origin,
+        direction=direction,
+        height=height,
+        distances=tuple(float(d) for d in spec.get("distances", (2, 5, 10, 15))),
+        heights=tuple(float(z) for z in spec.get("heights", (0.25, 0.5, 1.0))),
+        span=offsets[:, None] * span * across,
+    )
+    pts = probe.points().reshape(-1, 3)
+    if np.any(pts < domain.lower) or np.any(pts > domain.upper):
+        raise ConfigError(key, "wake points leave the domain: shorten distances or span")
+    return probe
+
+
+@dataclass(frozen=True)
 class Scene:
     """Model of one scene; see docs/design.md "Scene config" for the keys."""
 
@@ -53,6 +109,7 @@ class Scene:
     probes: Mapping[str, Box]
     lee_force: tuple[str, str] | None = None  # (sheltered cloth, exposed cloth)
     reference_speed: float = 1.0
+    wake: WakeProbe | None = None
     extra: Mapping = field(default_factory=dict)
 
     def cloth_index(self, name: str) -> int:
@@ -155,6 +212,7 @@ def build_scene(cfg) -> Scene:
         ref = max((s.speed_scale() for s in sources), default=1.0) or 1.0
     if ref <= 0:
         raise ConfigError("scene.reference_speed", f"must be > 0, got {ref}")
+    wake = _wake(cfg["wake"], domain) if cfg.get("wake") else None
     return Scene(
         name=name,
         lower=domain.lower,
@@ -168,4 +226,5 @@ def build_scene(cfg) -> Scene:
         probes=probes,
         lee_force=lee_force,
         reference_speed=float(ref),
+        wake=wake,
     )

@@ -10,6 +10,7 @@ to the cloth solver.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import re
 import sys
@@ -33,6 +34,7 @@ from windbench.grid import Grid
 from windbench.scenes import Scene, build_scene
 from windbench.wind import backend_class, make_wind
 from windbench.wind.base import Obstacles
+from windbench.wind.primitives import superpose
 
 log = logging.getLogger("windbench")
 MEMORY_FRACTION = 0.8  # of physical memory a run may plan to use
@@ -63,11 +65,20 @@ class RunSetup:
     aero: AeroParams
     cloth: ClothModel
     dt: float
-    n_steps: int
+    n_steps: int  # recorded steps
+    spinup_steps: int  # steps before recording starts
     snapshot_steps: tuple[int, ...]
     probe_points: dict[str, np.ndarray]
     cfl: float  # fastest source speed x dt / h
     frames: FramePlan
+    flow_through_time: float  # s: domain length along the wind / reference speed
+    analysis_start: float  # s: start of the steady window the statistics are taken over
+    wake: tuple | None  # (points, direction, u0) of the scene's wake probe
+
+    @property
+    def start_time(self) -> float:
+        """Simulated time at which recording starts (the end of the spin-up)."""
+        return self.spinup_steps * self.dt
 
 
 def _require(cond: bool, key: str, message: str):
@@ -96,6 +107,14 @@ def prepare(cfg: DictConfig) -> RunSetup:
     _check_cloth_specs(cfg.scene)  # before the meshes are built
     scene = build_scene(cfg.scene)
     grid = Grid.from_domain(scene.lower, scene.upper, int(cfg.grid.resolution))  # no arrays yet
+    spinup_steps = int(round(_spinup(cfg.sim.spinup, scene) / dt))
+    _require(
+        spinup_steps + n_steps <= cfg.sim.max_steps,
+        "sim.spinup",
+        f"{spinup_steps} spin-up steps and {n_steps} recorded are more than sim.max_steps = "
+        f"{cfg.sim.max_steps}; raise sim.max_steps to run that many",
+    )
+    flow_through, start = analysis_window(scene, spinup_steps * dt, (spinup_steps + n_steps) * dt)
     model = ClothModel.from_meshes(scene.cloths)
     plan = memory_plan(cfg, scene, grid, model, n_steps)
     _check_memory(plan)
@@ -119,11 +138,73 @@ def prepare(cfg: DictConfig) -> RunSetup:
         cloth=model,
         dt=dt,
         n_steps=n_steps,
+        spinup_steps=spinup_steps,
         snapshot_steps=tuple(int(s) for s in snaps if s >= 1),
         probe_points={k: b.lattice(int(cfg.output.probe_points)) for k, b in scene.probes.items()},
         cfl=cfl,
         frames=plan_frames(cfg.output.frames, scene, grid, dt, n_steps),
+        flow_through_time=flow_through,
+        analysis_start=start,
+        wake=_wake_reference(scene),
     )
+
+
+FLOW_THROUGHS = 2.0  # the wind has crossed the domain this many times before statistics
+
+
+def flow_through_time(scene: Scene) -> float:
+    """T = L / U_ref: L the domain's extent along the fastest uniform source, U_ref the
+    scene's reference speed; NaN for a scene without a uniform source (no flow through)."""
+    uniform = [s for s in scene.sources if s.kind == "uniform" and s.speed_scale() > 0]
+    if not uniform:
+        return math.nan
+    fastest = max(uniform, key=lambda s: s.speed_scale())
+    direction = np.abs(np.asarray(fastest.velocity)) / fastest.speed_scale()
+    return float(direction @ (scene.upper - scene.lower)) / scene.reference_speed
+
+
+def analysis_window(scene: Scene, start: float, end: float) -> tuple[float, float]:
+    """(flow-through time T, start of the steady window) of a run recording [start, end].
+
+    Statistics are taken over t >= max(start, 2 T): by then the wind has crossed the
+    domain twice (the particle front at least once, since particles move with the
+    sources' own wind) and the start-up transient has left it. A scene whose air does not
+    flow through keeps the second half of the recorded time.
+    """
+    flow_through = flow_through_time(scene)
+    if not np.isfinite(flow_through):
+        return flow_through, start + 0.5 * (end - start)
+    return flow_through, max(start, FLOW_THROUGHS * flow_through)
+
+
+def _spinup(value, scene: Scene) -> float:
+    """``sim.spinup`` in seconds: ``auto`` is FLOW_THROUGHS flow-through times (0 for a
+    scene without flow through), so that recording starts with a developed wind."""
+    if str(value) == "auto":
+        flow_through = flow_through_time(scene)
+        return FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+    try:
+        seconds = float(value)
+    except (TypeError, ValueError):
+        seconds = math.nan
+    _require(
+        np.isfinite(seconds) and seconds >= 0,
+        "sim.spinup",
+        f"must be 'auto' or a number of seconds >= 0, got {value!r}",
+    )
+    return seconds
+
+
+def _wake_reference(scene: Scene):
+    """(points, direction, u0) of the scene's wake probe: u0 is the undisturbed wind of the
+    sources along the probe's direction at each point (``None`` without a probe)."""
+    if scene.wake is None:
+        return None
+    points = scene.wake.points()
+    u0 = superpose(scene.sources, points.reshape(-1, 3)) @ scene.wake.direction
+    if np.any(u0 <= 0):
+        raise ConfigError("scene.wake", "the sources' wind must blow along its direction there")
+    return points, scene.wake.direction, u0.reshape(points.shape[:-1])
 
 
 def plan_frames(frames, scene: Scene, grid: Grid, dt: float, n_steps: int) -> FramePlan:
@@ -305,6 +386,8 @@ class Recorder:
         self.snap_times: list[float] = []
         self.snap_wind: list[np.ndarray] = []
         self.snap_probe: list[np.ndarray] = []
+        self.probe_sum: np.ndarray | None = None  # probe wind summed over the steady window
+        self.probe_count = 0
         self.frame_times: list[float] = []
         self.frame_data: dict[str, list[np.ndarray]] = {}
 
@@ -319,6 +402,15 @@ class Recorder:
         self.snap_times.append(t)
         self.snap_wind.append(np.array(wind, dtype=np.float64))
         self.snap_probe.append(probe_wind)
+
+    def accumulate_probes(self, t: float, probe_wind: np.ndarray):
+        """Add the probe wind of a step to the steady-window mean (t >= analysis_start)."""
+        if t < self.setup.analysis_start - 1e-9:
+            return
+        if self.probe_sum is None:
+            self.probe_sum = np.zeros_like(probe_wind)
+        self.probe_sum += probe_wind
+        self.probe_count += 1
 
     def frame(self, t: float, arrays: dict[str, np.ndarray]):
         """One animation frame: arrays named in :data:`windbench.dataset.FRAME_VARIABLES`."""
@@ -363,6 +455,9 @@ class Simulation:
         t2 = time.perf_counter()
         self.state = self.cloth_solver.step(self.state, vert_f, s.dt)
         t3 = time.perf_counter()
+        if n < s.spinup_steps:  # spin-up: the wind develops, nothing is recorded
+            self._check_finite(n, self.wind.velocity())
+            return
         self._record(n, tri_f, (t1 - t0, t2 - t1, t3 - t2, t3 - t0))
 
     def _record(self, n: int, tri_f, seconds):
@@ -388,19 +483,22 @@ class Simulation:
         if s.scene.lee_force:
             shel, expo = (s.scene.cloth_index(c) for c in s.scene.lee_force)
             rec.add("lee_force_ratio", metrics.force_ratio(forces[shel], forces[expo]))
+        if s.wake is not None:
+            points, direction, u0 = s.wake
+            along = self.wind.sample(points.reshape(-1, 3)) @ direction
+            rec.add("wake_speed_ratio", (along.reshape(u0.shape) / u0).mean(axis=-1))
         for key, value in {**self.wind.stats(), **self.cloth_solver.stats(self.state)}.items():
             if key.endswith("_seconds"):  # a backend's own phase, e.g. advect_seconds
                 rec.add_phase(key.removesuffix("_seconds"), float(value))
             else:
                 rec.add(key, float(value))
-        if n + 1 in s.snapshot_steps:
-            pts = sorted(probe_wind)
-            rec.snapshot(
-                (n + 1) * s.dt,
-                u,
-                np.concatenate([probe_wind[k] for k in pts]) if pts else np.zeros((0, 3)),
-            )
-        if n + 1 in s.frames.steps:
+        pts = sorted(probe_wind)
+        probes = np.concatenate([probe_wind[k] for k in pts]) if pts else np.zeros((0, 3))
+        rec.accumulate_probes((n + 1) * s.dt, probes)
+        recorded = n + 1 - s.spinup_steps  # steps since recording started
+        if recorded in s.snapshot_steps:
+            rec.snapshot((n + 1) * s.dt, u, probes)
+        if recorded in s.frames.steps:
             rec.frame((n + 1) * s.dt, self._frame(u, tri_f))
 
     def _frame(self, u: np.ndarray, tri_f: np.ndarray) -> dict[str, np.ndarray]:
@@ -423,7 +521,7 @@ class Simulation:
 
     def run(self, progress: bool = True) -> Recorder:
         bar = tqdm(
-            range(self.setup.n_steps),
+            range(self.setup.spinup_steps + self.setup.n_steps),
             desc=f"{self.setup.scene.name}/{self.wind.name}",
             unit="step",
             disable=not (progress and sys.stderr.isatty()),

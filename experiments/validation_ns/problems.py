@@ -25,7 +25,10 @@ NONE = Obstacles.rigid_only(())
 
 
 def backend(spec, resolution, **params) -> NavierStokesWind:
-    """The backend on the scene ``spec`` (a scene config dict) with ``params`` overrides."""
+    """The backend on the scene ``spec`` (a scene config dict) with ``params`` overrides;
+    laminar (``turbulence="none"``) unless ``params`` say otherwise: the problems' answers
+    are solutions of the Navier-Stokes equations without an eddy viscosity."""
+    params.setdefault("turbulence", "none")
     scene = build_scene(spec)
     grid = Grid.from_domain(scene.lower, scene.upper, resolution)
     return NavierStokesWind(scene, grid, OmegaConf.structured(NavierStokesConfig(**params)))

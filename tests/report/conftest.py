@@ -14,7 +14,14 @@ from tests.report.tiny_runs import FRAMES, SHIRT, WALL, run_ok
 def frame_runs(tmp_path_factory) -> Path:
     """Runs that keep frames: two_flags_wall with particles and global, a shirt (global)."""
     root = tmp_path_factory.mktemp("frames")
-    run_ok(root / "wall_particles", *WALL, "wind=particles", FRAMES)
+    run_ok(  # the gust front crossing the domain: no spin-up, cells of 0.5 m
+        root / "wall_particles",
+        *WALL,
+        "wind=particles",
+        FRAMES,
+        "sim.spinup=0",
+        "grid.resolution=32",
+    )
     run_ok(root / "wall_global", *WALL, "wind=global", FRAMES)
     run_ok(root / "shirt_global", *SHIRT, "wind=global")
     return root

@@ -1,54 +1,67 @@
-"""experiment=paper: its sweep covers the paper's scenes and backends, and every run of it
-that this tree can compose passes the run checks (no ConfigError mid-sweep)."""
+"""The paper comparison's sweeps (conf/experiment/paper.yaml lists them): together they
+cover the paper's scenes, every backend, three resolutions spanning 4x, two time steps,
+three particle seeds and, per scene, a second-order reference at least twice as fine as
+the finest compared run with two coarser levels; every run they hold passes the run
+checks (no ConfigError mid-sweep)."""
 
 from __future__ import annotations
 
 import itertools
-from pathlib import Path
 
 import pytest
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
 from windbench.cli import CONFIG_DIR, compose_config
 from windbench.simulate import prepare
 
-PAPER_SCENES = {"flag", "two_flags_wall", "shirt", "opposing_sources", "fence"}
+PAPER_SCENES = {"flag", "two_flags_wall", "shirt", "opposing_sources"}
 BACKENDS = {"global", "particles", "navier_stokes"}
 
 
-def _sweep() -> dict[str, list[str]]:
+def _sweep(experiment: str, *overrides: str) -> dict[str, list[str]]:
     with initialize_config_dir(version_base="1.3", config_dir=CONFIG_DIR):
         cfg = compose(
-            config_name="config", overrides=["experiment=paper"], return_hydra_config=True
+            config_name="config",
+            overrides=[f"experiment={experiment}", *overrides],
+            return_hydra_config=True,
         )
-    assert cfg.experiment == "paper"
-    return {k: str(v).split(",") for k, v in cfg.hydra.sweeper.params.items()}
+    params = {k: str(v).split(",") for k, v in cfg.hydra.sweeper.params.items()}
+    params.setdefault("scene", [str(cfg.scene.name)])
+    params.setdefault("wind", [str(cfg.wind.name)])
+    for key in ("grid.resolution", "sim.dt", "seed"):
+        params.setdefault(key, [str(OmegaConf.select(cfg, key))])
+    params["wind.advection"] = [str(cfg.wind.advection)] if "advection" in cfg.wind else []
+    return params
 
 
-def test_paper_sweep_covers_every_backend_and_paper_scene():
-    params = _sweep()
-    assert set(params["wind"]) == BACKENDS
-    assert set(params["scene"]) == PAPER_SCENES
-    assert len(params["grid.resolution"]) >= 3  # cost exponent and convergence need sizes
-    assert len(params["sim.dt"]) >= 2  # lee_force_ratio against time step
+def _resolutions(params) -> list[int]:
+    return sorted(int(r) for r in params["grid.resolution"])
 
 
-def test_every_composable_paper_run_passes_the_run_checks():
-    params = _sweep()
-    conf = Path(CONFIG_DIR)
-    scenes = [s for s in params["scene"] if (conf / "scene" / f"{s}.yaml").is_file()]
-    winds = [w for w in params["wind"] if (conf / "wind" / f"{w}.yaml").is_file()]
-    if not scenes or not winds:
-        pytest.skip("no scene or backend of the paper sweep in this tree")
+def test_the_sweeps_cover_backends_scenes_resolutions_seeds_and_references():
+    paper, seeds, fence = _sweep("paper"), _sweep("paper_seeds"), _sweep("fence")
+    assert set(paper["wind"]) == BACKENDS == set(fence["wind"])
+    assert set(paper["scene"]) == PAPER_SCENES == set(seeds["scene"])
+    compared = _resolutions(paper)
+    assert len(compared) >= 3 and compared[-1] >= 4 * compared[0]  # spanning 4x
+    assert len(paper["sim.dt"]) >= 2  # lee_force_ratio against time step
+    assert seeds["wind"] == ["particles"] and len({*paper["seed"], *seeds["seed"]}) == 3
+    reference = _sweep("reference")
+    assert reference["wind.advection"] == ["second_order"]
+    assert set(reference["scene"]) == PAPER_SCENES
+    levels = _resolutions(reference)
+    assert len(levels) == 3 and levels[-1] >= 2 * compared[-1]
+    fence_levels = [64, 128, 256]  # the fence's reference (paper.yaml's command)
+    assert fence_levels[-1] >= 2 * _resolutions(fence)[-1]
+
+
+@pytest.mark.parametrize("experiment", ["paper", "fence", "reference"])
+def test_every_run_of_the_sweeps_passes_the_run_checks(experiment):
+    params = _sweep(experiment)
     dt = min(params["sim.dt"], key=float)  # the time step does not change what is checked
-    for scene, wind, res in itertools.product(scenes, winds, params["grid.resolution"]):
-        cfg = compose_config(
-            [
-                "experiment=paper",
-                f"scene={scene}",
-                f"wind={wind}",
-                f"grid.resolution={res}",
-                f"sim.dt={dt}",
-            ]
-        )
-        prepare(cfg)  # raises ConfigError naming the key if the sweep holds a bad run
+    for scene, wind, res in itertools.product(
+        params["scene"], params["wind"], params["grid.resolution"]
+    ):
+        overrides = [f"experiment={experiment}", f"scene={scene}", f"grid.resolution={res}"]
+        prepare(compose_config([*overrides, f"wind={wind}", f"sim.dt={dt}"]))

@@ -13,8 +13,9 @@ from omegaconf import OmegaConf
 from windbench.aero import AeroParams
 from windbench.cli import compose_config
 from windbench.report.collect import RunRecord, flatten, swept_keys
+from windbench.report.comparison import pareto_front
 from windbench.report.figures import fit_exponent, hoerner_long_plate, plate_table, tagging_field
-from windbench.report.lee import choose_references, lee_error
+from windbench.report.lee import assign_lee_errors, choose_references, lee_error
 
 
 def _record(points, u, free=6.0, **settings) -> RunRecord:
@@ -66,12 +67,55 @@ def test_reference_is_the_finest_navier_stokes_run_of_each_scene(lattice):
         _record(lattice, u, wind="global", scene="flag", resolution=128, dt=0.01, seed=0),
     ]
     refs = choose_references(runs)
-    assert refs["fence"] is runs[2]
+    assert refs["fence"].run is runs[2]
     assert "flag" not in refs  # no Navier-Stokes run of the flag: no reference
     # given a reference folder, its finest run serves even when it is not Navier-Stokes;
     # scenes it lacks keep the inputs' Navier-Stokes reference
     given = choose_references(runs, [runs[4]])
-    assert given["flag"] is runs[4] and given["fence"] is runs[2]
+    assert given["flag"].run is runs[4] and given["fence"].run is runs[2]
+
+
+def _level(points, u, resolution, advection="second_order"):
+    rec = _record(points, u, wind="navier_stokes", scene="fence", resolution=resolution, dt=0.01)
+    rec.config = {"wind.advection": advection, "wind.turbulence": "mixing_length", "seed": 0}
+    return rec
+
+
+def test_the_reference_is_second_order_and_its_gci_follows_roache(lattice):
+    """Three levels whose lee winds differ by 0.8 and 0.2 m/s (ratio 4 at r = 2: observed
+    order 2) give GCI = 1.25 e21 / (2^2 - 1); a finer first-order run is not chosen."""
+    base = np.zeros_like(lattice)
+    shift = np.array([1.0, 0.0, 0.0])
+    levels = [_level(lattice, base, 128), _level(lattice, base + 0.2 * shift, 64)]
+    levels.append(_level(lattice, base + 1.0 * shift, 32))
+    first_order = _level(lattice, base, 256, advection="semi_lagrangian")
+    ref = choose_references([first_order, *levels])["fence"]
+    assert ref.run is levels[0] and [r.settings["resolution"] for r in ref.levels] == [128, 64, 32]
+    e21 = 0.2 / 6.0
+    assert ref.difference == pytest.approx(e21)
+    assert ref.observed and ref.order == pytest.approx(2.0)
+    assert ref.gci == pytest.approx(1.25 * e21 / 3.0)
+    two = choose_references(levels[:2])["fence"]  # two levels: formal order, F_s = 3
+    assert not two.observed and two.gci == pytest.approx(3.0 * e21 / 3.0)
+
+
+def test_a_reference_whose_uncertainty_exceeds_the_errors_it_ranks_is_flagged(lattice):
+    base = np.zeros_like(lattice)
+    levels = [_level(lattice, base, 64), _level(lattice, base + [0.6, 0, 0], 32)]
+    close = _record(lattice, base + [0.05, 0, 0], wind="particles", scene="fence", resolution=32)
+    close.figures = {"lee_error": 0.0}
+    for r in levels:
+        r.figures = {"lee_error": 0.0}
+    refs = choose_references([*levels, close])
+    assign_lee_errors([*levels, close], refs)
+    assert close.figures["lee_error"] == pytest.approx(0.05 / 6.0)
+    assert refs["fence"].gci > close.figures["lee_error"] and refs["fence"].converged is False
+
+
+def test_pareto_front_keeps_the_points_nothing_beats_in_both():
+    cost = np.array([1.0, 2.0, 3.0, 2.5, 0.5])
+    error = np.array([0.5, 0.2, 0.1, 0.3, 0.9])
+    np.testing.assert_array_equal(pareto_front(cost, error), [True, True, True, False, True])
 
 
 def test_fit_exponent_recovers_a_power_law():

@@ -102,3 +102,37 @@ def test_bad_primitive_config_names_the_key():
         primitive_from_config({"type": "source", "center": [0, 0, 0], "core_radius": -1}, "s")
     with pytest.raises(ConfigError, match=r"unknown key"):
         primitive_from_config({"type": "uniform", "velocity": [1, 0, 0], "speed": 3}, "s")
+
+
+def test_log_and_power_profiles_give_the_reference_wind_at_the_reference_height():
+    log = primitive_from_config(
+        {"type": "uniform", "velocity": [6.0, 0.0, 0.0],
+         "profile": {"type": "log", "roughness": 0.03, "reference_height": 10.0}},
+        "s",
+    )  # fmt: skip
+    z = np.array([0.01, 0.03, 1.0, 10.0, 20.0])
+    pts = np.stack([np.zeros_like(z), np.zeros_like(z), z], axis=1)
+    expected = np.where(z > 0.03, np.log(np.maximum(z, 0.03) / 0.03) / np.log(10.0 / 0.03), 0.0)
+    np.testing.assert_allclose(superpose([log], pts)[:, 0], 6.0 * expected, rtol=1e-12)
+    power = primitive_from_config(
+        {"type": "uniform", "velocity": [0.0, 4.0, 0.0],
+         "profile": {"type": "power", "exponent": 0.14, "reference_height": 10.0, "ground": 1.0}},
+        "s",
+    )  # fmt: skip
+    w = superpose([power], np.array([[0.0, 0.0, 11.0], [0.0, 0.0, 6.0], [0.0, 0.0, 0.5]]))
+    np.testing.assert_allclose(w[:, 1], [4.0, 4.0 * 0.5**0.14, 0.0], rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("profile", "key"),
+    [
+        ({"type": "cubic", "reference_height": 1}, "s.profile.type"),
+        ({"type": "log", "roughness": 2.0, "reference_height": 1.0}, "s.profile.reference_height"),
+        ({"type": "log", "roughness": -1, "reference_height": 1.0}, "s.profile.roughness"),
+        ({"type": "power", "reference_height": 1.0}, "s.profile.exponent"),
+    ],
+)
+def test_bad_profiles_name_the_key(profile, key):
+    spec = {"type": "uniform", "velocity": [6.0, 0.0, 0.0], "profile": profile}
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+        primitive_from_config(spec, "s")

@@ -1,4 +1,4 @@
-"""Reports: run or sweep folders -> combined dataset -> figures -> report (issue 6).
+"""Reports: run or sweep folders -> combined dataset -> figures -> report.
 
 ``windbench-report DIR... [--out PATH] [--reference DIR] [--export DIR]`` writes into the
 output folder (default ``reports/<sweep name>/``):

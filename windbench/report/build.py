@@ -18,9 +18,9 @@ from windbench.aero import AeroParams
 from windbench.config import AeroConfig
 from windbench.dataset import write_atomic
 from windbench.report import animation, validation
+from windbench.report import comparison as C
 from windbench.report import figures as F
 from windbench.report.collect import (
-    AVERAGE_FROM,
     RunRecord,
     combine,
     display_path,
@@ -33,7 +33,7 @@ from windbench.report.collect import (
     swept_keys,
 )
 from windbench.report.document import FigureRef, Note, Section, Table, Text, to_html, to_markdown
-from windbench.report.lee import assign_lee_errors, choose_references
+from windbench.report.lee import Reference, assign_lee_errors, choose_references
 
 PAPER_COMMAND = "windbench -m experiment=paper"
 MAX_ROWS = 300  # runs listed in report.md / index.html; summary.csv has them all
@@ -44,7 +44,7 @@ class Report:
     out: Path
     records: list[RunRecord]
     summary: pd.DataFrame
-    references: dict[str, RunRecord]
+    references: dict[str, Reference]
     drawn: list[str] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     exported: list[Path] = field(default_factory=list)
@@ -75,17 +75,28 @@ def _aero_params(records: Sequence[RunRecord]) -> tuple[AeroParams, str]:
     return AeroParams(d.drag_coefficient, d.lift_coefficient, d.air_density), "windbench defaults"
 
 
-def _reference_note(refs: dict[str, RunRecord], reference_dir) -> str:
+def _reference_note(refs: dict[str, Reference], reference_dir) -> str:
     if not refs:
         return (
             "No reference: no `navier_stokes` run among the inputs"
             + (f" and none readable under `{reference_dir}`" if reference_dir else "")
             + ", so `lee_error` is empty."
         )
-    src = "the finest `navier_stokes` run of the scene among the inputs"
+    src = (
+        "the finest `navier_stokes` run of the scene with the second-order scheme "
+        "(`wind.advection=second_order`; another scheme where there is none) among the inputs"
+    )
     if reference_dir:
-        src = f"the finest run of the scene under `--reference {reference_dir}`, else " + src
-    return f"Reference for `lee_error`: {src}."
+        given = " ".join(str(d) for d in _folders(reference_dir))
+        src = f"the finest such run under `--reference {given}`, else " + src
+    unconverged = sorted(s for s, r in refs.items() if r.converged is False)
+    flag = (
+        f" **Not converged** (uncertainty larger than the smallest error it ranks): "
+        f"{', '.join(unconverged)}."
+        if unconverged
+        else ""
+    )
+    return f"Reference for `lee_error`: {src}.{flag}"
 
 
 def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
@@ -165,21 +176,60 @@ def build_report(
     export_every: int = 1,
     progress: bool = True,
 ) -> Report:
-    """Read every run under ``inputs``, write the report folder, return what was done."""
+    """Read every run under ``inputs``, write the report folder, return what was done:
+    read and rank the runs, write the data files, draw and write the documents, export."""
+    records, refs = _read(inputs, reference, progress)
+    name = sweep_name(records, inputs)
+    out = Path(out) if out else Path("reports") / name
+    summary = _write_data(records, refs, out, name)
+    C.reference_table(refs).to_csv(out / "references.csv", index=False)
+    report = Report(out, records, summary, refs)
+    regenerate = F.regenerate(records, inputs, out, reference)
+    place = _placer(report, out / "figures", regenerate)
+    complete = summary[summary["status"] == "complete"].copy()
+    records_ok = [r for r in records if r.status == "complete"]
+    checks = validation.section(records_ok, inputs, place)
+    sections = [
+        _overview(report, inputs, reference),
+        _comparison_section(records, complete, refs, place),
+        _paper_section(records, place),
+        animation.section(records_ok, out / "figures", place, regenerate, progress),
+        _measured_section(complete, place),
+        plate_section(*_aero_params(records), place),
+        *([checks] if checks else []),
+        _runs_section(report, swept_keys(records)),
+    ]
+    title = f"windbench report: {name}"
+    (out / "report.md").write_text(to_markdown(title, sections), encoding="utf-8")
+    (out / "index.html").write_text(to_html(title, sections, out / "figures"), encoding="utf-8")
+    if export:
+        report.exported += _export(records, Path(export), export_every)
+    return report
+
+
+def _read(inputs: Sequence, reference, progress: bool):
+    """The runs (sorted, duplicates marked) and each scene's reference, lee errors set."""
     records = read_runs(find_runs(inputs), progress=progress) + find_invalid(inputs)
     records.sort(key=sort_key)
     if not records:
         raise FileNotFoundError(f"no windbench.nc under {[str(i) for i in inputs]}")
     mark_duplicates(records)
-    ref_records = read_runs(find_runs([reference]), progress=progress) if reference else None
+    ref_records = (
+        read_runs(find_runs(_folders(reference)), progress=progress) if reference else None
+    )
     refs = choose_references(records, ref_records)
-    assign_lee_errors(records, refs)
+    assign_lee_errors([*records, *(ref_records or [])], refs)
+    return records, refs
 
-    name = sweep_name(records, inputs)
-    out = Path(out) if out else Path("reports") / name
-    fig_dir = out / "figures"
-    fig_dir.mkdir(parents=True, exist_ok=True)
 
+def _folders(reference) -> list:
+    """``--reference`` as a list of folders (one folder or several)."""
+    return list(reference) if isinstance(reference, list | tuple) else [reference]
+
+
+def _write_data(records, refs: dict[str, Reference], out: Path, name: str) -> pd.DataFrame:
+    """``summary.csv`` (every run) and ``results.nc`` (the complete runs combined)."""
+    (out / "figures").mkdir(parents=True, exist_ok=True)
     summary = summary_frame(records)
     summary.to_csv(out / "summary.csv", index=False)
     combined = combine(records)
@@ -188,13 +238,12 @@ def build_report(
         lee_reference="; ".join(f"{s}: {r.path}" for s, r in sorted(refs.items())) or "none",
     )
     write_atomic(combined, out / "results.nc")
+    return summary
 
-    report = Report(out, records, summary, refs)
-    complete = summary[summary["status"] == "complete"].copy()
-    dims = swept_keys(records)
-    ref_note = _reference_note(refs, reference)
-    aero, aero_src = _aero_params(records)
-    regenerate = F.regenerate(records, inputs, out, reference)
+
+def _placer(report: Report, fig_dir: Path, regenerate: str):
+    """place(result) -> the document block of a drawn (saved) or missing figure, its
+    caption ending with the command that regenerates it."""
 
     def place(result) -> FigureRef | Note:
         if isinstance(result, F.Missing):
@@ -204,12 +253,18 @@ def build_report(
         report.drawn.append(result.name)
         return FigureRef(result.name, result.title, f"{result.caption} {regenerate}")
 
-    counts = summary["status"].value_counts().to_dict()
-    overview = Section(
+    return place
+
+
+def _overview(report: Report, inputs, reference) -> Section:
+    counts = report.summary["status"].value_counts().to_dict()
+    dims = swept_keys(report.records)
+    complete = report.summary[report.summary["status"] == "complete"]
+    return Section(
         "Overview",
         [
             Text(
-                f"**{len(records)}** run files under "
+                f"**{len(report.records)}** run files under "
                 + ", ".join(f"`{i}`" for i in inputs)
                 + ": "
                 + ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
@@ -218,39 +273,30 @@ def build_report(
                 + "."
             ),
             Text(
-                f"Figures per run: lee and divergence figures are time means over the second "
-                f"half of each run (t >= {AVERAGE_FROM:g} t_end); time per step is the mean "
-                "(`seconds_per_step`) and the median (`seconds_per_step_median`, used in the "
-                "cost figures and tables: robust to other processes) of the wall time over "
-                "every step but the first (which includes numba's compile or cache load). "
-                "Files: `results.nc` (combined), `summary.csv` (one row per run), `figures/` "
-                "(PNG and SVG)."
+                "Every statistic is taken over a run's steady window: from two flow-through "
+                "times of the domain (L / U_ref) after the wind starts, when the start-up "
+                "transient has left the domain and the particle front has crossed it; runs "
+                "spin up for that long before recording (`sim.spinup=auto`). A run too short "
+                "to have a window is `unsettled`: listed below with the reason and left out "
+                "of every figure. Time per step: the median wall time over the window "
+                "(robust to other processes), the first step (numba's compile or cache "
+                "load) excluded. Files: `results.nc` (combined), `summary.csv` (one row per "
+                "run), `figures/` (PNG and SVG)."
             ),
-            Text(ref_note),
+            Text(_reference_note(report.references, reference)),
+            Table(
+                lee_at_a_glance(complete),
+                "Lee at a glance: mean |u| in the lee box / in the free stream (speed) and "
+                "|F| on the sheltered / exposed cloth (force), finest run of each backend, "
+                "steady-window means; 1 = no lee, 0 = full shelter",
+            ),
         ],
     )
-    if refs:
-        overview.blocks.append(
-            Table(
-                pd.DataFrame(
-                    [
-                        {"scene": s, "reference run": r.label, "file": display_path(r.path)}
-                        for s, r in sorted(refs.items())
-                    ]
-                ),
-                "Lee-error references",
-            )
-        )
-    overview.blocks.append(
-        Table(
-            lee_at_a_glance(complete),
-            "Lee at a glance: mean |u| in the lee box / in the free stream (speed) and |F| on "
-            "the sheltered / exposed cloth (force), finest run of each backend; 1 = no lee, "
-            "0 = full shelter",
-        )
-    )
+
+
+def _paper_section(records, place) -> Section:
     records_ok = [r for r in records if r.status == "complete"]
-    paper = Section(
+    return Section(
         "The paper's figures (§5)",
         [
             Text(
@@ -260,19 +306,37 @@ def build_report(
             *(place(F.attempt(name, records_ok)) for name in F.RUN_FIGURES),
         ],
     )
+
+
+def _comparison_section(records, complete, refs: dict[str, Reference], place) -> Section:
+    table = C.accuracy_cost_table(complete)
+    blocks = [
+        Text(
+            "The paper compares the wind models in words (§4.3). Here every backend and "
+            "resolution is measured against a converged reference: per scene a "
+            "Navier-Stokes run with the second-order scheme, finer than every compared run, "
+            "whose own uncertainty (the grid-convergence index of its two or three finest "
+            "levels) is stated and drawn. A reference whose uncertainty exceeds the errors "
+            "it ranks is marked as not converged."
+        ),
+        Table(C.reference_table(refs), "References and their uncertainty (fractions of U_ref)"),
+        place(C.fig_accuracy_cost(table, refs)),
+        Table(table, "Accuracy against cost (Pareto front marked)"),
+        place(C.fig_lee_error(complete, refs)),
+        place(C.fig_wake(C.wake_frame(records, refs))),
+        Table(C.window_table(records), "Steady windows per scene (s of simulated time)"),
+    ]
+    return Section("Accuracy against cost: the comparison, measured", blocks)
+
+
+def _measured_section(complete, place) -> Section:
     exps = F.cost_exponents(complete) if len(complete) else pd.DataFrame()
-    measured = Section(
-        "§4.3 measured: cost, lee accuracy, divergence, time step",
+    return Section(
+        "§4.3 measured: cost, divergence, time step",
         [
-            Text(
-                "The paper compares the models in words (§4.3): Navier-Stokes is accurate and "
-                "expensive, the global field cheap and without lee, particle tracing cheap with "
-                "lee. Here the same comparison is measured on the runs above."
-            ),
             place(F.fig_cost(complete)),
             Table(exps, "Fitted cost exponents p (wind-phase time per step ~ cells^p)"),
             place(F.fig_cost_particles(complete)),
-            place(F.fig_lee_error(complete, ref_note)),
             place(F.fig_divergence(complete)),
             place(F.fig_force_ratio_dt(complete)),
             Table(
@@ -282,52 +346,42 @@ def build_report(
             ),
         ],
     )
-    plate = plate_section(aero, aero_src, place)
-    shown = _run_table(summary, dims)
+
+
+def _runs_section(report: Report, dims) -> Section:
+    shown = _run_table(report.summary, dims)
     caption = "Every run file found (full table: `summary.csv`)"
     if len(shown) > MAX_ROWS:
         caption = f"The first {MAX_ROWS} of {len(shown)} run files (all of them: `summary.csv`)"
         shown = shown.head(MAX_ROWS)
     runs = Section("Runs", [Table(shown, caption)])
-    skipped = report.skipped
-    if skipped:
-        runs.blocks.append(
-            Table(
-                pd.DataFrame(
-                    [
-                        {
-                            "file": display_path(r.path),
-                            "status": r.status,
-                            "reason": _short(r.reason),
-                        }
-                        for r in skipped
-                    ]
-                ),
-                "Skipped (not combined)",
-            )
+    if report.skipped:
+        skipped = pd.DataFrame(
+            [
+                {"file": display_path(r.path), "status": r.status, "reason": _short(r.reason)}
+                for r in report.skipped
+            ]
         )
-    moving = animation.section(records_ok, fig_dir, place, regenerate, progress)
-    checks = validation.section(records_ok, inputs, place)
-    sections = [overview, paper, moving, measured, plate, *([checks] if checks else []), runs]
-    title = f"windbench report: {name}"
-    (out / "report.md").write_text(to_markdown(title, sections), encoding="utf-8")
-    (out / "index.html").write_text(to_html(title, sections, fig_dir), encoding="utf-8")
+        runs.blocks.append(Table(skipped, "Skipped (not combined)"))
+    return runs
 
-    if export:
-        from windbench.report.export import export_run, run_label
 
-        labels: set[str] = set()
-        for rec in records:
-            if rec.status in ("unreadable",):
-                continue
-            label = run_label(rec.settings)
-            n = 1
-            while label in labels:
-                n += 1
-                label = run_label(rec.settings, f"_{n}")
-            labels.add(label)
-            report.exported += export_run(rec.path, Path(export) / label, export_every)
-    return report
+def _export(records, folder: Path, every: int) -> list[Path]:
+    """Each readable run's wind and cloth as VTK/PLY under ``folder/<label>/``."""
+    from windbench.report.export import export_run, run_label
+
+    written, labels = [], set()
+    for rec in records:
+        if rec.status == "unreadable":
+            continue
+        label = run_label(rec.settings)
+        n = 1
+        while label in labels:
+            n += 1
+            label = run_label(rec.settings, f"_{n}")
+        labels.add(label)
+        written += export_run(rec.path, folder / label, every)
+    return written
 
 
 def plate_section(aero: AeroParams, source: str, place) -> Section:

@@ -1,4 +1,4 @@
-"""``windbench-report DIR... [--out PATH] [--reference DIR] [--export DIR]``.
+"""``windbench-report DIR... [--out PATH] [--reference DIR...] [--export DIR]``.
 
 Exit status 0 when the report was written (skipped runs are listed, not fatal: a damaged
 dataset is listed as ``unreadable: checksum ...`` and never combined), 2 on bad arguments
@@ -24,9 +24,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--reference",
         type=Path,
+        nargs="+",
         metavar="DIR",
-        help="folder with the reference run(s) for lee_error (default: the finest "
-        "navier_stokes run of each scene among the inputs)",
+        help="folders with the reference runs for lee_error: per scene the finest "
+        "second-order navier_stokes run and its coarser levels (default: those among the "
+        "inputs)",
     )
     p.add_argument(
         "--export",

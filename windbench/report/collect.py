@@ -1,37 +1,33 @@
 """Run folders -> run records -> one combined dataset with the swept settings as dimensions.
 
-Every ``windbench.nc`` under the given folders is opened lazily (xarray + netCDF4): only the
-per-step figures and the lee probe values are read, so a sweep of thousands of runs need not
-fit in memory. Each file becomes one :class:`RunRecord` with a status:
+Every ``windbench.nc`` under the given folders is opened lazily (xarray + netCDF4): only
+the per-step figures and the probe values are read. Each file becomes one
+:class:`RunRecord` with a status:
 
-- ``complete``  — ``status = complete`` and every planned step recorded; enters the combination;
-- ``failed``    — the run stopped (``status = failed``); kept in the summary with its ``failure``;
-- ``partial``   — readable but incomplete (fewer steps than planned, unknown status, or a
-  variable of DESIGN.md's run dataset missing);
-- ``unreadable``— netCDF cannot open it (truncated, corrupted) or a checksum does not match
-  (every chunk of every variable is read back first, :func:`windbench.dataset.verify`:
-  the reason then starts with ``checksum``); its settings are taken from the Hydra
-  ``.hydra/config.yaml`` beside it when there is one;
-- ``invalid``   — no dataset, but the run's ``run_status.yaml`` (windbench.sweep) says the
-  config was refused before any work; the reason is kept.
+- ``complete``: ``status = complete``, every planned step recorded and a steady window;
+- ``unsettled``: complete, but no recorded step after the steady window's start
+  (:func:`windbench.metrics.unsettled_reason`);
+- ``failed``: the run stopped (``status = failed``), with its ``failure``;
+- ``partial``: readable but incomplete (fewer steps than planned, unknown status, or a
+  required variable missing);
+- ``unreadable``: netCDF cannot open it or a checksum does not match
+  (:func:`windbench.dataset.verify`; the reason then starts with ``checksum``);
+- ``invalid``: no dataset, the run's ``run_status.yaml`` says the config was refused.
 
-Only ``complete`` runs are combined; the others are listed as skipped with the reason. Each
-record keeps the code version that made it (:func:`windbench.dataset.code_version`):
-:func:`code_versions` lists them, and the report warns when a sweep mixes several.
+Only ``complete`` runs are combined; the others are listed with the reason. Each record
+keeps the code version that made it (:func:`code_versions`; the report warns when a sweep
+mixes several).
 
-Figures per run (DESIGN.md "Run dataset"):
-
-- ``lee_speed_ratio``, ``lee_force_ratio``, ``divergence_rms``: mean over the second half of
-  the simulated time (:data:`AVERAGE_FROM`), after the start-up transient of the wind;
-  ``*_final`` is the value at the last step; ``divergence_max`` is the maximum over all steps.
-- ``step_seconds_<phase>``: mean wall time per step and phase over every step but the first
-  (the first includes numba's compile or cache load); ``seconds_per_step`` = phase ``total``;
-  ``seconds_per_step_median`` its median over the same steps (robust to other processes on
-  a shared machine), ``wind_seconds_median`` the same for the wind phase alone (the
-  backend's own cost: the cost figure uses it).
-- every other per-step variable (a backend's ``stats()``, e.g. ``live_particles`` or pressure
-  iterations): its time mean, like the lee figures;
-- ``lee_error`` (see :mod:`windbench.report.lee`).
+Figures per run, all over the steady window t >= ``analysis_start`` (two flow-through
+times, :func:`windbench.simulate.analysis_window`; older datasets: the second half):
+window means of ``lee_speed_ratio``, ``lee_force_ratio``, ``divergence_rms`` and every other
+per-step variable (a backend's ``stats()``), ``*_final`` at the last step,
+``divergence_max`` the window's maximum; ``seconds_per_step`` (mean wall time, first step
+excluded: it holds numba's compile or cache load), ``seconds_per_step_median`` and
+``wind_seconds_median`` (medians over the window, robust to other processes),
+``seconds_per_simulated_second`` (median step / dt); the lee probe wind averaged over the
+window (``probe_wind_mean``, for :mod:`windbench.report.lee`) and the window-mean wake
+profile u/u0 (``wake_speed_ratio``).
 """
 
 from __future__ import annotations
@@ -50,10 +46,11 @@ from omegaconf import OmegaConf
 from windbench.config import schema_fields
 from windbench.dataset import CONVENTIONS, VARIABLES, code_version, verify
 from windbench.errors import DatasetUnreadable
+from windbench.metrics import unsettled_reason
 
 RUN_FILE = "windbench.nc"
 STATUS_FILE = "run_status.yaml"  # windbench.sweep.STATUS_FILE
-AVERAGE_FROM = 0.5  # time averages use t >= AVERAGE_FROM * t_end
+AVERAGE_FROM = 0.5  # datasets without analysis_start: time averages over t >= this x t_end
 # canonical setting -> dotted config key; always dimensions of the combined dataset
 SETTINGS = {
     "wind": "wind.name",
@@ -70,8 +67,15 @@ AVERAGED = ("lee_speed_ratio", "lee_force_ratio", "divergence_rms")
 # run variable's own long_name and units come from the run datasets); units None: a label
 FIGURES: dict[str, tuple[str, str | None]] = {
     "seconds_per_step": ("mean wall time per step (first step excluded)", "s"),
-    "seconds_per_step_median": ("median wall time per step (first step excluded)", "s"),
-    "wind_seconds_median": ("median wall time of the wind phase per step (first excluded)", "s"),
+    "seconds_per_step_median": ("median wall time per step over the steady window", "s"),
+    "wind_seconds_median": ("median wall time of the wind phase per step, steady window", "s"),
+    "seconds_per_simulated_second": ("median wall time per step / dt", "1"),
+    "analysis_start": ("start of the steady window", "s"),
+    "flow_through_time": ("domain length along the wind / reference speed", "s"),
+    "spinup": ("simulated time before recording", "s"),
+    "end_time": ("last recorded time", "s"),
+    "is_reference": ("the run is its scene's lee reference", "1"),
+    "reference_level": ("the run is a level of its scene's reference", "1"),
     "step_seconds": ("mean wall time per step and phase (first step excluded)", "s"),
     "grid_cells": ("number of grid cells", "1"),
     "grid_spacing": ("grid cell edge h", "m"),
@@ -95,7 +99,7 @@ class RunRecord:
     """What the report knows about one run file (small: no fields, no cloth frames)."""
 
     path: Path
-    status: str  # complete | failed | partial | unreadable
+    status: str  # complete | unsettled | failed | partial | unreadable | invalid
     reason: str = ""
     settings: dict = field(default_factory=dict)  # canonical settings (wind, scene, ...)
     config: dict = field(default_factory=dict)  # flattened resolved config (dotted keys)
@@ -106,6 +110,7 @@ class RunRecord:
     free_stream_speed: float = math.nan  # mean |u| at the free-stream probes, last snapshot
     reference_speed: float = math.nan
     experiment: str = ""
+    wake: pd.DataFrame | None = None  # window-mean u/u0: index distance (H), columns height (H)
     code: str = ""  # code_version() of the code that made it
     meta: dict = field(default_factory=dict)  # figure -> (long_name, units) for results.nc
 
@@ -211,35 +216,47 @@ def _config_beside(path: Path) -> dict:
         return {}
 
 
-def _time_mean(values: np.ndarray, times: np.ndarray) -> float:
+def window_mask(ds: xr.Dataset) -> np.ndarray:
+    """Recorded steps inside the run's steady window (t >= ``analysis_start``)."""
+    times = np.asarray(ds["time"].values, dtype=float)
+    start = float(ds.attrs.get("analysis_start", math.nan))
+    if not np.isfinite(start):
+        start = AVERAGE_FROM * times[-1] if times.size else 0.0
+    return times >= start - 1e-9
+
+
+def _window_mean(values: np.ndarray, window: np.ndarray) -> float:
     if values.size == 0 or not np.isfinite(values).any():
         return math.nan
-    late = times >= AVERAGE_FROM * times[-1]
-    return float(np.nanmean(values[late] if late.any() else values))
+    chosen = values[window] if window.any() else values
+    return float(np.nanmean(chosen)) if np.isfinite(chosen).any() else math.nan
 
 
 def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
-    times = np.asarray(ds["time"].values, dtype=float)
+    window = window_mask(ds) if ds.sizes.get("time", 0) else np.zeros(0, bool)
     figs: dict[str, float] = {}
     for name in AVERAGED:
         if name in ds and ds.sizes.get("time", 0):
             vals = np.asarray(ds[name].values, dtype=float)
-            figs[name] = _time_mean(vals, times)
+            figs[name] = _window_mean(vals, window)
             figs[f"{name}_final"] = float(vals[-1])
         else:
             figs[name] = figs[f"{name}_final"] = math.nan
     known = {*AVERAGED, "divergence_max"}
-    for name, var in ds.data_vars.items():  # backend figures (stats()): time means
+    for name, var in ds.data_vars.items():  # backend figures (stats()): window means
         if var.dims == ("time",) and name not in known and var.dtype.kind in "fiu":
-            figs[str(name)] = _time_mean(np.asarray(var.values, dtype=float), times)
+            figs[str(name)] = _window_mean(np.asarray(var.values, dtype=float), window)
     if "divergence_max" in ds and ds.sizes.get("time", 0):
-        figs["divergence_max"] = float(np.nanmax(ds["divergence_max"].values))
+        vals = np.asarray(ds["divergence_max"].values, dtype=float)
+        figs["divergence_max"] = float(np.nanmax(vals[window] if window.any() else vals))
     else:
         figs["divergence_max"] = math.nan
     phases = {}
     if "step_seconds" in ds and ds.sizes.get("time", 0):
         sec = np.asarray(ds["step_seconds"].values, dtype=float)
-        steady = sec[1:] if sec.shape[0] > 1 else sec
+        later = np.arange(sec.shape[0]) >= 1 if sec.shape[0] > 1 else np.ones(1, bool)
+        steady = sec[later]
+        in_window = sec[later & window] if (later & window).any() else steady
         for j, ph in enumerate(ds["phase"].values):
             phases[str(ph)] = float(steady[:, j].mean())
     figs["seconds_per_step"] = phases.get("total", math.nan)
@@ -247,11 +264,18 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     names = [str(p) for p in ds["phase"].values] if phases else []
     for phase, key in (("total", "seconds_per_step_median"), ("wind", "wind_seconds_median")):
         if phase in names:
-            figs[key] = float(np.median(steady[:, names.index(phase)]))
+            figs[key] = float(np.median(in_window[:, names.index(phase)]))
+    figs["seconds_per_simulated_second"] = figs["seconds_per_step_median"] / float(
+        ds.attrs.get("dt", math.nan)
+    )
     shape = ds.attrs.get("grid_shape")
     shape = (
         [int(v) for v in np.atleast_1d(shape)] if shape is not None else list(ds["wind"].shape[1:4])
     )
+    for key in ("analysis_start", "flow_through_time", "spinup"):
+        figs[key] = float(ds.attrs.get(key, math.nan))
+    times = np.asarray(ds["time"].values, dtype=float)
+    figs["end_time"] = float(times[-1]) if times.size else math.nan
     figs["grid_cells"] = int(np.prod(shape))
     figs["grid_spacing"] = float(ds.attrs.get("grid_spacing", math.nan))
     figs["steps_completed"] = int(ds.attrs.get("steps_completed", ds.sizes.get("time", 0)))
@@ -260,11 +284,16 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
 
 
 def _probes(ds: xr.Dataset, rec: RunRecord):
-    if "probe_wind" not in ds or ds.sizes.get("snapshot", 0) == 0:
+    """The lee probe wind: the steady-window mean (``probe_wind_mean``), or the last
+    snapshot in datasets without it."""
+    if "probe_wind_mean" in ds:
+        last = np.asarray(ds["probe_wind_mean"].values, dtype=float)
+    elif "probe_wind" in ds and ds.sizes.get("snapshot", 0):
+        last = np.asarray(ds["probe_wind"].isel(snapshot=-1).values, dtype=float)
+    else:
         return
     box = np.asarray(ds["probe_box"].values).astype(str)
     pts = np.asarray(ds["probe_points"].values, dtype=float)
-    last = np.asarray(ds["probe_wind"].isel(snapshot=-1).values, dtype=float)
     lee, free = box == "lee", box == "free_stream"
     rec.lee_points, rec.lee_wind = pts[lee], last[lee]
     if free.any():
@@ -274,13 +303,13 @@ def _probes(ds: xr.Dataset, rec: RunRecord):
 def _figure_meta(ds: xr.Dataset) -> dict:
     """(long_name, units) of each figure _figures takes from a per-step run variable."""
     meta = {}
-    late = f"t >= {AVERAGE_FROM} t_end"
+    late = "the steady window (t >= analysis_start)"
     for name, var in ds.data_vars.items():
         if var.dims != ("time",):
             continue
         long_name, units = var.attrs.get("long_name", name), var.attrs.get("units")
         if name == "divergence_max":
-            meta[name] = (f"{long_name}: maximum over all steps", units)
+            meta[name] = (f"{long_name}: maximum over the steady window", units)
             continue
         meta[str(name)] = (f"{long_name}: time mean over {late}", units)
         if name in AVERAGED:
@@ -336,6 +365,8 @@ def read_run(path: Path) -> RunRecord:
         try:
             rec.figures, rec.phases = _figures(ds)
             _probes(ds, rec)
+            rec.wake = _wake(ds)
+            unsettled = _unsettled(ds)
         except Exception as err:  # noqa: BLE001 - a damaged variable makes the run partial
             rec.status, rec.reason = "partial", f"cannot read figures: {type(err).__name__}: {err}"
             return rec
@@ -348,7 +379,29 @@ def read_run(path: Path) -> RunRecord:
         rec.status, rec.reason = "partial", f"missing variables {missing}"
     elif planned >= 0 and done < planned:
         rec.status, rec.reason = "partial", f"{done} of {planned} steps recorded"
+    elif unsettled:
+        rec.status, rec.reason = "unsettled", unsettled
     return rec
+
+
+def _unsettled(ds: xr.Dataset) -> str:
+    """The reason a run has no steady window ('' if it has one or predates the attribute)."""
+    if "analysis_start" not in ds.attrs or not ds.sizes.get("time", 0):
+        return ""
+    return unsettled_reason(ds["time"].values, float(ds.attrs["analysis_start"]))
+
+
+def _wake(ds: xr.Dataset) -> pd.DataFrame | None:
+    """Window mean of ``wake_speed_ratio``: rows distance / H, columns height / H."""
+    if "wake_speed_ratio" not in ds or not ds.sizes.get("time", 0):
+        return None
+    window = window_mask(ds)
+    mean = ds["wake_speed_ratio"].isel(time=np.flatnonzero(window)).mean("time")
+    return pd.DataFrame(
+        mean.values,
+        index=pd.Index(mean["wake_distance"].values, name="distance_H"),
+        columns=pd.Index(mean["wake_height"].values, name="height_H"),
+    )
 
 
 def read_runs(paths: Sequence[Path], progress: bool = True) -> list[RunRecord]:
@@ -500,7 +553,10 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     ds.attrs.update(
         Conventions=CONVENTIONS,
         runs=len(good),
-        averaging=f"time means over t >= {AVERAGE_FROM} t_end; step times exclude the first step",
+        averaging=(
+            "means over each run's steady window (t >= analysis_start: two flow-through "
+            "times); step times exclude the first step"
+        ),
         code_versions="; ".join(code_versions(good)),
     )
     return ds

@@ -71,7 +71,7 @@ def _cell(v) -> str:
             return "–"
         if v != 0 and (abs(v) < 1e-3 or abs(v) >= 1e5):
             return f"{v:.2e}"
-        return f"{v:.3g}"
+        return f"{v:.3g}"  # three significant digits
     if isinstance(v, bool):
         return "yes" if v else ""
     return str(v)

@@ -1,4 +1,4 @@
-"""Export run datasets for ParaView and Blender (issue 6, item 6).
+"""Export run datasets for ParaView and Blender.
 
 Per run, into ``<export dir>/<run label>/``:
 

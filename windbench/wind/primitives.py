@@ -7,7 +7,8 @@ again a potential flow.
 =========== ======================================================================
 primitive   velocity w_i(x)
 =========== ======================================================================
-uniform     w = U (the paper's "directional" wind source; exactly constant)
+uniform     w = U (the paper's "directional" wind source; exactly constant), or
+            w = U f(z) with an atmospheric ``profile`` over the ground (below)
 source      w = m / (4 pi r^2) r_hat * g(r),  m = ``strength`` (m^3/s of air emitted)
 sink        the same with -m: air drawn in
 vortex      w = Gamma / (2 pi d) theta_hat * g_v(d),  d = distance from the axis line,
@@ -22,7 +23,16 @@ the bare singular law, with w = 0 exactly on the singular set):
 - vortex: ``g_v(d) = 1 - exp(-(d/rc)^2)`` — the Lamb-Oseen vortex, whose vorticity
   ``Gamma/(pi rc^2) exp(-(d/rc)^2)`` vanishes exponentially outside the core.
 
-Each primitive is one row of a parameter table (``kind`` + 11 floats) so that the same
+A uniform source may carry an atmospheric boundary-layer ``profile`` over the ground at
+height z_g (U is then the wind at ``reference_height`` z_r above it, s = z - z_g):
+
+- ``log``: f = ln(s / z_0) / ln(z_r / z_0) for s > z_0, else 0 — the neutral surface layer,
+  u(z) = (u_* / kappa) ln(z / z_0), with roughness length z_0 = ``roughness`` (m);
+- ``power``: f = (s / z_r)^alpha for s > 0, else 0, alpha = ``exponent``.
+
+Such a wind is still divergence free (u depends on z only), but no longer irrotational.
+
+Each primitive is one row of a parameter table (``kind`` + 15 floats) so that the same
 numba kernel serves the vectorised field here, the superposed ``global`` backend and the
 per-source particle tracing of §4.2.2, where a particle follows only its own w_i.
 """
@@ -39,7 +49,11 @@ from windbench.errors import ConfigError
 
 UNIFORM, SOURCE, SINK, VORTEX = 0, 1, 2, 3
 KINDS = {"uniform": UNIFORM, "source": SOURCE, "sink": SINK, "vortex": VORTEX}
-N_PARAMS = 11  # centre(3), axis(3), velocity(3), strength, core_radius
+NO_PROFILE, LOG_PROFILE, POWER_PROFILE = 0, 1, 2
+PROFILES = {"log": LOG_PROFILE, "power": POWER_PROFILE}
+# centre(3), axis(3), velocity(3), strength, core_radius,
+# profile kind, roughness or exponent, reference height, ground height
+N_PARAMS = 15
 
 
 @dataclass(frozen=True)
@@ -52,6 +66,8 @@ class Primitive:
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     strength: float = 0.0
     core_radius: float = 0.0
+    profile: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 0.0)  # kind, z0|alpha, z_r, z_g
+    turbulence: tuple[float, float] | None = None  # (intensity, length scale m) at the inflow
 
     @property
     def kind_id(self) -> int:
@@ -65,6 +81,7 @@ class Primitive:
                 axis / np.linalg.norm(axis),
                 self.velocity,
                 [self.strength, self.core_radius],
+                self.profile,
             ]
         ).astype(np.float64)
 
@@ -83,7 +100,7 @@ class Primitive:
 
 
 _ALLOWED = {
-    "uniform": {"type", "velocity", "emit", "gusts", "name"},
+    "uniform": {"type", "velocity", "profile", "turbulence", "emit", "gusts", "name"},
     "source": {"type", "center", "strength", "core_radius", "emit", "gusts", "name"},
     "sink": {"type", "center", "strength", "core_radius", "emit", "gusts", "name"},
     "vortex": {"type", "center", "axis", "strength", "core_radius", "emit", "gusts", "name"},
@@ -100,6 +117,55 @@ def _vec3(spec: Mapping, name: str, key: str, default=None):
     return tuple(float(v) for v in arr)
 
 
+def _positive_number(spec: Mapping, name: str, key: str) -> float:
+    value = spec.get(name)
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{key}.{name}", f"must be a number > 0, got {value!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise ConfigError(f"{key}.{name}", f"must be a finite number > 0, got {value}")
+    return value
+
+
+def _profile(spec: Mapping | None, key: str) -> tuple[float, float, float, float]:
+    """The (kind, z0 | alpha, z_r, z_g) row entries of a uniform source's ``profile``."""
+    if spec is None:
+        return (float(NO_PROFILE), 0.0, 1.0, 0.0)
+    kind = spec.get("type")
+    if kind not in PROFILES:
+        raise ConfigError(f"{key}.type", f"must be one of {sorted(PROFILES)}, got {kind!r}")
+    shape = "roughness" if kind == "log" else "exponent"
+    allowed = {"type", shape, "reference_height", "ground"}
+    unknown = set(spec) - allowed
+    if unknown:
+        raise ConfigError(key, f"unknown key(s) {sorted(unknown)}; allowed {sorted(allowed)}")
+    parameter = _positive_number(spec, shape, key)
+    height = _positive_number(spec, "reference_height", key)
+    if kind == "log" and height <= parameter:
+        raise ConfigError(
+            f"{key}.reference_height", f"must exceed the roughness {parameter} m, got {height}"
+        )
+    ground = float(spec.get("ground", 0.0))
+    if not np.isfinite(ground):
+        raise ConfigError(f"{key}.ground", f"must be a finite height (m), got {ground}")
+    return (float(PROFILES[kind]), parameter, height, ground)
+
+
+def _turbulence(spec: Mapping | None, key: str) -> tuple[float, float] | None:
+    """(intensity, length scale) of a uniform source's inflow ``turbulence``
+    (:mod:`windbench.wind.fluctuation`)."""
+    if spec is None:
+        return None
+    unknown = set(spec) - {"intensity", "length_scale"}
+    if unknown:
+        raise ConfigError(key, f"unknown key(s) {sorted(unknown)}; allowed intensity, length_scale")
+    intensity = _positive_number(spec, "intensity", key)
+    if intensity >= 1:
+        raise ConfigError(f"{key}.intensity", f"must lie in (0, 1), got {intensity}")
+    return intensity, _positive_number(spec, "length_scale", key)
+
+
 def primitive_from_config(spec: Mapping, key: str) -> Primitive:
     """Build and check one primitive from a scene's ``sources`` entry."""
     kind = spec.get("type")
@@ -112,7 +178,12 @@ def primitive_from_config(spec: Mapping, key: str) -> Primitive:
             f"unknown key(s) {sorted(unknown)} for a {kind}; allowed {sorted(_ALLOWED[kind])}",
         )
     if kind == "uniform":
-        return Primitive("uniform", velocity=_vec3(spec, "velocity", key))
+        return Primitive(
+            "uniform",
+            velocity=_vec3(spec, "velocity", key),
+            profile=_profile(spec.get("profile"), f"{key}.profile"),
+            turbulence=_turbulence(spec.get("turbulence"), f"{key}.turbulence"),
+        )
     strength = float(spec.get("strength", Primitive.strength))
     core = float(spec.get("core_radius", Primitive.core_radius))
     if core < 0:
@@ -125,8 +196,14 @@ def primitive_from_config(spec: Mapping, key: str) -> Primitive:
     )
 
 
+def profile_scale(primitive: Primitive, points) -> np.ndarray:
+    """f(z) of a uniform source's profile at world points ``(n, 3)`` (1 without one)."""
+    row = primitive.row()
+    return np.array([profile_factor(row, z) for z in np.asarray(points)[:, 2]])
+
+
 def parameter_table(primitives: Sequence[Primitive]) -> tuple[np.ndarray, np.ndarray]:
-    """(kinds ``(m,)`` int64, params ``(m, 11)`` float64) for the numba kernels."""
+    """(kinds ``(m,)`` int64, params ``(m, N_PARAMS)`` float64) for the numba kernels."""
     kinds = np.array([p.kind_id for p in primitives], dtype=np.int64)
     params = np.zeros((len(primitives), N_PARAMS), dtype=np.float64)
     for i, p in enumerate(primitives):
@@ -147,6 +224,19 @@ def superpose(primitives: Sequence[Primitive], points, table=None) -> np.ndarray
     return out.reshape(pts.shape)
 
 
+@njit(cache=True, inline="always")
+def profile_factor(prm, pz):
+    """f(z) of a uniform source's profile (module docstring); 1 without one."""
+    shape = prm[11]
+    if shape == NO_PROFILE:
+        return 1.0
+    s = pz - prm[14]
+    if shape == LOG_PROFILE:
+        z0 = prm[12]
+        return np.log(s / z0) / np.log(prm[13] / z0) if s > z0 else 0.0
+    return (s / prm[13]) ** prm[12] if s > 0.0 else 0.0
+
+
 @njit(cache=True)
 def primitive_velocity(kind, prm, px, py, pz, out):
     """out = w_i(p) for one primitive (kind, parameter row prm); see module table."""
@@ -154,9 +244,10 @@ def primitive_velocity(kind, prm, px, py, pz, out):
     out[1] = 0.0
     out[2] = 0.0
     if kind == UNIFORM:
-        out[0] = prm[6]
-        out[1] = prm[7]
-        out[2] = prm[8]
+        f = profile_factor(prm, pz)
+        out[0] = f * prm[6]
+        out[1] = f * prm[7]
+        out[2] = f * prm[8]
         return
     rx = px - prm[0]
     ry = py - prm[1]

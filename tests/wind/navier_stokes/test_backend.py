@@ -178,7 +178,8 @@ def test_fence_lee_through_the_run_loop(tmp_path):
         [
             "wind=navier_stokes",
             "scene=fence",
-            "grid.resolution=16",
+            "grid.resolution=48",
+            "sim.spinup=0",
             "sim.duration=0.5",
             "sim.progress=false",
         ]
@@ -191,7 +192,7 @@ def test_fence_lee_through_the_run_loop(tmp_path):
         ds.probe_wind.isel(snapshot=-1).where(ds.probe_box == "free_stream", drop=True), axis=-1
     ).mean()
     assert lee < 0.5
-    assert free > 0.9 * 6.0
+    assert free > 0.9 * 5.5  # the log profile gives 5.5-5.9 m/s in the free-stream box
     assert float(ds.pressure_iterations.max()) < 30
     assert "advect" in list(ds.phase.values) and "project" in list(ds.phase.values)
 

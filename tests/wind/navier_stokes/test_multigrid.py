@@ -37,10 +37,10 @@ def test_operator_and_residual_match_the_stencil_written_out(periodic):
     x, b = rng.random(SHAPE), rng.random(SHAPE)
     expected = _operator_numpy(x, lev.w, periodic)
     out = np.empty(SHAPE)
-    xax = pressure.apply_operator(x, *lev.args(), out)
+    xax = pressure.apply_operator(x, lev.args(), out)
     np.testing.assert_allclose(out, expected, rtol=1e-13, atol=1e-13)
     assert xax == pressure.dot(x, out)  # the fused x . A x: the same sum, the same bits
-    pressure.residual(x, b, *lev.args(), out)
+    pressure.residual(x, b, lev.args(), out)
     np.testing.assert_allclose(out, b - expected, rtol=1e-13, atol=1e-13)
 
 
@@ -93,7 +93,7 @@ def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega
     x0, b = rng.random(SHAPE), rng.random(SHAPE)
     x = x0.copy()
     no_dot = pressure.NO_DOT
-    pressure.gauss_seidel(x, b, *lev.args(), 0, 1, *no_dot)  # one red half sweep
+    pressure.gauss_seidel(x, b, lev.args(), 0, 1, *no_dot)  # one red half sweep
     diag = sum(  # sum_f w_f: the diagonal of A
         np.take(lev.w[a], np.arange(SHAPE[a]) + s, axis=a) for a in range(3) for s in (0, 1)
     )
@@ -104,12 +104,12 @@ def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega
     np.testing.assert_allclose(x, expected, rtol=1e-13, atol=1e-13)
     single, multi = x0.copy(), x0.copy()
     for colour in (1, 0, 1, 0):
-        pressure.gauss_seidel(single, b, *lev.args(), colour, 1, *no_dot)
-    pressure.gauss_seidel(multi, b, *lev.args(), 1, 4, *no_dot)
+        pressure.gauss_seidel(single, b, lev.args(), colour, 1, *no_dot)
+    pressure.gauss_seidel(multi, b, lev.args(), 1, 4, *no_dot)
     np.testing.assert_array_equal(single, multi)
     # asked for r . x, the same sweeps return it (taken plane by plane as they finish)
     dotted, r = x0.copy(), rng.random(SHAPE)
-    rx = pressure.gauss_seidel(dotted, b, *lev.args(), 1, 4, r, np.zeros(SHAPE[0]))
+    rx = pressure.gauss_seidel(dotted, b, lev.args(), 1, 4, r, np.zeros(SHAPE[0]))
     np.testing.assert_array_equal(dotted, multi)
     assert rx == pytest.approx(float(np.sum(r * multi)), rel=1e-13)
 

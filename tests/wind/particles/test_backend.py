@@ -75,11 +75,14 @@ def test_opposing_sources_each_side_has_its_own_source(run_config):
 
 
 def test_fence_lee_and_free_stream(run_config):
-    _, ds = run_config(["scene=fence", "wind=particles", "grid.resolution=32", "sim.duration=1.5"])
+    _, ds = run_config(["scene=fence", "wind=particles", "grid.resolution=48", "sim.duration=1.5"])
     assert ds.attrs["status"] == "complete"
     assert float(ds["lee_speed_ratio"].isel(time=-1)) < 0.05
     free = ds["probe_wind"].isel(snapshot=-1).sel(probe_point=ds.probe_box == "free_stream")
-    assert np.linalg.norm(free.values, axis=1).mean() >= 0.95 * 6.0
+    points = ds["probe_points"].sel(probe_point=ds.probe_box == "free_stream").values
+    scene = build_scene(compose_config(["scene=fence"]).scene)
+    # reached cells hold the source's own wind there (the log profile, sampled trilinearly)
+    np.testing.assert_allclose(free.values, superpose(scene.sources, points), rtol=0.02)
     assert {"live_particles", "particle_steps_per_second", "cell_crossings"} <= set(ds)
     assert "trace" in ds["phase"].values
 

@@ -12,25 +12,19 @@ and q(x - d) interpolated trilinearly in q's padded lattice (ghost layer filled 
 interpolated from the staggered components) and every face takes the mean of the
 displacements of the two cells it separates (:func:`advect`). For a linear velocity field this is exactly the
 RK2 backtrace of the face itself (d is then linear in x; tested); for a smooth one it
-differs from it by O(h^2), so the scheme stays second order in space and time. Backtraced
+differs from it by O(h^2), so the backtrace stays second order. Backtraced
 points leaving the domain are wrapped on periodic axes and clamped onto the boundary
 otherwise, where the ghost layer gives the wall/inflow value; midpoints of the ghost cells
 beyond a non-periodic face read the ghost layer (the boundary condition's extension).
 
 MacCormack: q^ = A_dt(q), q~ = A_-dt(q^), q_new = q^ + (q - q~)/2, clamped to the min/max
 of the eight lattice values that the forward backtrace interpolated from (the limiter that
-keeps it stable); second order in space and time where the field is smooth.
+keeps it stable, :func:`maccormack_correct`), or clamped only where q is not smooth
+(:func:`maccormack_correct_smooth`, the second-order scheme's limiter).
 
-Cost. Positions are cell coordinates and velocities cells per step, so a face needs no
-division. Backtracing every face separately took three interpolations of the velocity per
-face (45 ns per face on one core at 64^3, fence, CPU time); once per cell centre it takes
-three per cell, about one per face, and the face step is one interpolation of q plus a
-two-point mean: 25 ns per face (measured A/B in one process, the same grid and field).
-The three components are carried in one pass over the planes, the displacements kept in
-a two-plane ring per thread rather than stored as a field (:func:`advect`): the same bits,
-advection 11.7 -> 10.7 ms per step at 64^3 and 83.9 -> 72.9 ms at 128^3 (two threads,
-medians over 28 and 14 steps of the fence, the two versions side by side in one
-process), and three float64 values per cell less.
+Positions are cell coordinates and velocities cells per step. The three components are
+carried in one pass over the planes, the displacements kept in a two-plane ring per thread
+(:func:`advect`) rather than stored as a field.
 """
 
 from __future__ import annotations
@@ -160,6 +154,66 @@ def maccormack_correct(q, q_hat, q_tilde, qmin, qmax, out):
                 out[I, J, K] = min(max(val, qmin[I, J, K]), qmax[I, J, K])
 
 
+SMOOTH_RATIO = 2.0  # second differences within this factor of each other: smooth
+
+
+@njit(cache=True, inline="always")
+def _second_differences_agree(q, I, J, K, b):
+    """True if the three second differences of q along axis b centred at face (I, J, K)
+    and its two neighbours have one strict sign and lie within SMOOTH_RATIO of each other
+    (or all vanish: an axis along which q is constant). False where the five-point stencil
+    leaves the padded array."""
+    e = (int(b == 0), int(b == 1), int(b == 2))
+    n = q.shape[b]
+    c = I if b == 0 else (J if b == 1 else K)
+    if c < 2 or c > n - 3:
+        return False
+    lo, hi, zeros, pos, neg = math.inf, 0.0, 0, 0, 0
+    for s in (-1, 0, 1):
+        i, j, k = I + s * e[0], J + s * e[1], K + s * e[2]
+        d2 = q[i - e[0], j - e[1], k - e[2]] - 2.0 * q[i, j, k] + q[i + e[0], j + e[1], k + e[2]]
+        if d2 > 0.0:
+            pos += 1
+        elif d2 < 0.0:
+            neg += 1
+        else:
+            zeros += 1
+        lo, hi = min(lo, abs(d2)), max(hi, abs(d2))
+    if zeros == 3:
+        return True
+    return (pos == 3 or neg == 3) and hi <= SMOOTH_RATIO * lo
+
+
+@njit(cache=True)
+def maccormack_correct_smooth(q, q_hat, q_tilde, qmin, qmax, axes, out):
+    """out = q^ + (q - q~)/2, clamped to [qmin, qmax] only where q is not smooth.
+
+    The clamp of Selle et al. (2008) cuts every smooth extremum that falls between lattice
+    points (an O(h^2) error per step, first order over a run at fixed CFL). Here a value
+    outside the bounds is kept when q is smooth around the face: along every axis the
+    second differences at the face and its two neighbours share one sign and agree within
+    SMOOTH_RATIO (a resolved extremum, as in the extremum-preserving limiter of Colella &
+    Sekora 2008); near a jump or a kink (walls, bodies, under-resolved shear) they change
+    sign or size and the value is clamped. ``axes[b] = 0``: axis b carries no derivative
+    (a one-cell periodic axis of a 2D problem) and is not tested."""
+    P0, P1, P2 = q.shape
+    for I in prange(1, P0 - 1):
+        for J in range(1, P1 - 1):
+            for K in range(1, P2 - 1):
+                val = q_hat[I, J, K] + 0.5 * (q[I, J, K] - q_tilde[I, J, K])
+                lo, hi = qmin[I, J, K], qmax[I, J, K]
+                if lo <= val <= hi:
+                    out[I, J, K] = val
+                elif (
+                    (axes[0] == 0 or _second_differences_agree(q, I, J, K, 0))
+                    and (axes[1] == 0 or _second_differences_agree(q, I, J, K, 1))
+                    and (axes[2] == 0 or _second_differences_agree(q, I, J, K, 2))
+                ):
+                    out[I, J, K] = val
+                else:
+                    out[I, J, K] = min(max(val, lo), hi)
+
+
 @njit(cache=True, inline="always")
 def _backtrace_plane(u, v, w, ci, cells, periodic, dt_h, out):
     """out[cj, ck] = the RK2 backtrace displacement dt u(x_c - dt/2 u(x_c)) at the centre
@@ -190,12 +244,14 @@ def _backtrace_plane(u, v, w, ci, cells, periodic, dt_h, out):
 
 
 @njit(cache=True, inline="always")
-def _carry_row(q, a, I, J, lo, hi, Jm, cells, periodic, out, qmin, qmax, bounds):
+def _carry_row(q, a, I, J, lo, hi, Jm, cells, periodic, dst, bounds):
     """out[I, J, K] = q(x - d) along row (I, J) of component a's faces (padded indices;
     face (I, J, K) separates the padded cells (I, J, K) - e_a and (I, J, K)): d the mean
     of the two cells' displacements, read from the planes ``lo`` (row Jm, K - 1 for
     a = 2) and ``hi`` (row J). Positions in cell coordinates (world = lower + h x); a
-    backtraced point is kept inside (:func:`_keep_inside`) and interpolated trilinearly."""
+    backtraced point is kept inside (:func:`_keep_inside`) and interpolated trilinearly.
+    ``dst`` = (out, qmin, qmax): the result and, with ``bounds``, the limiter's bounds."""
+    out, qmin, qmax = dst
     P0, P1, P2 = q.shape
     n0, n1, n2 = cells[0], cells[1], cells[2]
     s0 = -1.0 if a == 0 else -0.5
@@ -227,7 +283,7 @@ def _carry_plane(q, a, I, lo, hi, cells, periodic, out, qmin, qmax, bounds):
     1) separates the cells of rows J - 1 and J of one plane, the others cells of one row."""
     e1 = int(a == 1)
     for J in range(1, q.shape[1] - 1):
-        _carry_row(q, a, I, J, lo, hi, J - e1, cells, periodic, out, qmin, qmax, bounds)
+        _carry_row(q, a, I, J, lo, hi, J - e1, cells, periodic, (out, qmin, qmax), bounds)
 
 
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)

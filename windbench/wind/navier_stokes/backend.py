@@ -2,61 +2,38 @@
 (paper §4.1.2), on the scene's grid of cubic cells (physical sizes, SI units).
 
 Equations (4.1)-(4.2): div u = 0, du/dt = -(u . grad) u - grad p / rho + nu lap u + f.
-One step of ``dt`` (operator splitting, each operator in its own module):
+One step of ``dt``, each operator in its own module:
 
 1. cloth coupling, "prior to any other operation" (:mod:`.coupling`, ``wind.coupling``);
-2. body forces: ``wind.body_force`` (m/s^2) and the interior flow primitives (vortex,
-   source, sink) relaxing the air toward their own field w_i inside their core,
-   u += (1 - exp(-k dt)) chi_i (w_i - u), chi_i = exp(-(d/r_c)^2), k =
-   ``wind.source_relaxation`` (1/s), r_c = max(core_radius, h); a source/sink also
-   emits its volume m (m^3/s) as a divergence spread over its core in the projection;
-3. advection (:mod:`.advection`): semi-Lagrangian with an RK2 backtrace (once per cell
-   centre, faces take the mean of their two cells' displacements), or limited
-   MacCormack (``wind.advection``);
-4. implicit diffusion with kinematic viscosity ``wind.viscosity`` (:mod:`.diffusion`: a
-   Jacobi sweep from the advected field, then Gauss-Seidel until the error bound);
-5. pressure projection to the relative residual ``wind.pressure_tol`` (:mod:`.pressure`,
-   multigrid-preconditioned CG whose iteration count does not grow with resolution).
+2. forces (:mod:`.forcing`): ``wind.body_force`` and the interior flow primitives; a
+   source or sink also emits its volume as a divergence target of the projection;
+3. eddy viscosity of the mean flow, ``wind.turbulence`` (:mod:`.turbulence`): the surface
+   layer's K-theory of the sources' profile (default), Smagorinsky's subgrid model, or none;
+4. advection (:mod:`.advection`) and viscosity (:mod:`.diffusion`), ``wind.advection``:
+   ``semi_lagrangian`` (the paper's scheme: RK2 backtrace, trilinear interpolation) or
+   limited ``maccormack``, each followed by implicit (backward Euler) viscosity — first
+   order in time; or ``second_order``, the trapezoidal rule along the characteristics
+   (:meth:`NavierStokesWind._advect_diffuse_second_order`), second order in space and time;
+5. projection to the relative residual ``wind.pressure_tol`` (:mod:`.projection`, solved
+   by multigrid-preconditioned CG, :mod:`.multigrid`).
 
-Grid: MAC (staggered). Velocity component a lives on the centres of the faces normal to
-axis a; pressure at cell centres. Chosen because (i) the discrete divergence and
-gradient are adjoint, so the projection is an exact orthogonal projection (idempotent,
-divergence zero to the solver tolerance) with the compact 7-point Laplacian, free of the
-checkerboard modes of a collocated grid; (ii) "no flux through a wall" is simply a
-prescribed face velocity, so bodies, walls and cloth-blocked faces are face weights of
-the same Poisson matrix. The paper keeps all values at cell centres; ``velocity()``
-returns cell-centred values (mean of the two faces per axis, zero in solid cells) and
-``sample()`` interpolates those trilinearly, like every other backend.
+MAC grid: component a on the faces normal to axis a, pressure at cell centres, so that
+divergence and gradient are adjoint (the projection is an orthogonal projection free of
+checkerboard modes) and walls, bodies and cloth-blocked faces are prescribed face
+velocities. ``velocity()`` returns cell-centred values (the mean of two faces, zero in
+solid cells), which ``sample()`` interpolates trilinearly like every other backend.
 
-Boundaries (:mod:`.boundaries`): per face of ``scene.boundary``. Inflow value: the
-superposed scene sources evaluated at the face, where a *uniform* source counts only at
-faces it blows in through (U . n_out < 0), so ``opposing_sources`` (+U and -U) gets +U
-through x_min and -U through x_max; vortices, sources and sinks count at every inflow
-face. If a domain has no outflow face but its inflow carries a net volume flux (again
-``opposing_sources``), incompressibility has no solution with prescribed inflow; its
-inflow faces then become *openings*: the inflow velocity is imposed before each
-projection and the pressure there is zero, so air enters only as far as it can leave.
+Boundaries (:mod:`.boundaries`): inflow faces take the superposed sources (a uniform
+source only where it blows in, with its inflow ``turbulence`` if it has one:
+:mod:`windbench.wind.fluctuation`); a domain without an outflow face whose inflow carries
+a net volume flux turns its inflow faces into openings (pressure zero). The initial
+field is the superposed sources, zero at bodies, projected. Cells whose centre lies in a
+rigid body are solid: every face touching one has zero velocity (the paper's interior
+check).
 
-Initial condition: the superposed field of all sources at the faces, zero on faces
-touching a body, then projected (divergence-free from the first step; a scene without
-sources starts at rest).
-
-Defaults (``conf/wind/navier_stokes.yaml``): ``advection=semi_lagrangian`` (the paper's
-scheme, cheapest; ``maccormack`` is 3-30x less dissipative, see
-``experiments/validation_ns/README.md``), ``coupling=paper`` (§4.1.2 as written; cheap,
-but air still crosses a flag through the pressure solve — ``projection`` closes it).
-
-Figures per step (``stats()``): ``pressure_iterations``, ``pressure_residual`` (relative),
-``pressure_rhs_norm`` (||h div u*||_2 before the projection, m/s), ``mac_divergence_max``/
-``_rms`` (|div u| h / U_ref of the MAC divergence on air cells, which is what the
-projection zeroes; :meth:`divergence` gives the field to the loop), ``diffusion_sweeps``,
-``cfl``, ``cloth_cells`` (cells marked by cloth) and the phases ``couple``, ``advect``,
-``diffuse``, ``project`` (``*_seconds``).
-
-Rigid bodies: cells whose centre is inside a body (base-class ``solid_mask()``; thin
-``resolve=False`` poles mostly miss every centre) are solid: every face touching one has
-zero velocity, so nothing flows through a body and no velocity is ever assigned inside
-one (the paper's interior check).
+Figures per step (``stats()``): pressure iterations, residual and right-hand side, the
+MAC divergence on air cells, diffusion sweeps, CFL, cells marked by cloth, the largest
+eddy viscosity and its substeps, and the phases couple, advect, diffuse, project.
 """
 
 from __future__ import annotations
@@ -70,7 +47,14 @@ import numpy as np
 from windbench.errors import ConfigError
 from windbench.geometry.raster import triangle_cells
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.navier_stokes import advection, boundaries, coupling, diffusion
+from windbench.wind.fluctuation import Fluctuation
+from windbench.wind.navier_stokes import (
+    advection,
+    boundaries,
+    coupling,
+    diffusion,
+    turbulence,
+)
 from windbench.wind.navier_stokes.boundaries import (
     INFLOW,
     KIND_CODES,
@@ -90,11 +74,12 @@ from windbench.wind.navier_stokes.projection import (
     max_abs,
     subtract_gradient,
 )
-from windbench.wind.primitives import parameter_table, superpose
+from windbench.wind.primitives import parameter_table, profile_scale, superpose
 from windbench.wind.registry import WindConfig, register_backend
 
-ADVECTION = ("semi_lagrangian", "maccormack")
+ADVECTION = ("semi_lagrangian", "maccormack", "second_order")
 COUPLING = ("none", "paper", "projection")
+TURBULENCE = ("none", "smagorinsky", "mixing_length")
 DIFFUSION_MAX_SWEEPS = 500
 
 
@@ -103,7 +88,7 @@ class NavierStokesConfig(WindConfig):
     """``wind.*`` keys of the Navier-Stokes backend (paper §4.1)."""
 
     name: str = "navier_stokes"
-    advection: str = "semi_lagrangian"  # semi_lagrangian | maccormack
+    advection: str = "semi_lagrangian"  # semi_lagrangian | maccormack | second_order
     viscosity: float = 1.5e-5  # kinematic, m^2/s (air)
     pressure_tol: float = 1e-6  # relative residual of the projection
     pressure_max_iterations: int = 200
@@ -111,15 +96,28 @@ class NavierStokesConfig(WindConfig):
     source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
     coupling: str = "paper"  # none | paper | projection (paper §4.1.2)
     body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
+    turbulence: str = "mixing_length"  # none | smagorinsky | mixing_length (eddy viscosity)
+    smagorinsky_constant: float = 0.17  # C_s of nu_t = (C_s h)^2 |S|
+    mixing_length_limit: float = 40.0  # m, lambda of Blackadar's 1/l = 1/(kappa z) + 1/lambda
+    seed: int = 0  # synthetic inflow turbulence (conf/wind/navier_stokes.yaml sets ${seed})
 
 
 def _check(params):
-    name = str(params.get("advection", "semi_lagrangian"))
+    name = str(params.get("advection"))
     if name not in ADVECTION:
         raise ConfigError("wind.advection", f"must be one of {list(ADVECTION)}, got {name!r}")
-    name = str(params.get("coupling", "paper"))
+    name = str(params.get("coupling"))
     if name not in COUPLING:
         raise ConfigError("wind.coupling", f"must be one of {list(COUPLING)}, got {name!r}")
+    name = str(params.get("turbulence"))
+    if name not in TURBULENCE:
+        raise ConfigError("wind.turbulence", f"must be one of {list(TURBULENCE)}, got {name!r}")
+    cs = float(params.get("smagorinsky_constant"))
+    if not (np.isfinite(cs) and 0 < cs < 1):
+        raise ConfigError("wind.smagorinsky_constant", f"must lie in (0, 1), got {cs}")
+    limit = float(params.get("mixing_length_limit"))
+    if not (np.isfinite(limit) and limit > 0):
+        raise ConfigError("wind.mixing_length_limit", f"must be a length > 0 m, got {limit}")
     for key in ("viscosity", "source_relaxation"):
         val = float(params.get(key))
         if not (np.isfinite(val) and val >= 0):
@@ -154,6 +152,8 @@ class NavierStokesWind(WindField):
         "diffusion_sweeps": ("sweeps of the implicit diffusion solve", "1"),
         "cfl": ("CFL number max|u| dt / h of the step", "1"),
         "cloth_cells": ("cells marked by the cloth (coupling)", "1"),
+        "eddy_viscosity_max": ("largest eddy viscosity of the step (wind.turbulence)", "m2 s-1"),
+        "eddy_substeps": ("explicit substeps of the eddy-viscosity term", "1"),
     }
 
     @classmethod
@@ -171,6 +171,13 @@ class NavierStokesWind(WindField):
         self.diffusion_tol = float(params.diffusion_tol)
         self.max_iterations = int(params.pressure_max_iterations)
         self.relaxation = float(params.source_relaxation)
+        self.turbulence = str(params.turbulence)
+        self.time = 0.0
+        self.fluctuations = [
+            (s, Fluctuation.build(*s.turbulence, s.velocity, int(params.seed) + i))
+            for i, s in enumerate(scene.sources)
+            if s.turbulence is not None
+        ]
         self.body_force = np.asarray(list(params.body_force), dtype=float)
         shape = grid.shape
         self.h = float(grid.h)
@@ -182,13 +189,11 @@ class NavierStokesWind(WindField):
         # axes that carry a derivative: not a one-cell periodic axis (2D problems)
         self.axes = np.array([not (self.periodic[a] and shape[a] == 1) for a in range(3)], np.int64)
         self.origins = np.stack([component_origin(self.lower, self.h, a) for a in range(3)])
-        walls = [
+        self.walls = [
             np.asarray(scene.wall_velocity.get(f, np.zeros(3)), dtype=float)
             for f in boundaries.FACE_NAMES
         ]
-        self.planes = boundaries.boundary_planes(
-            self.kinds, walls, self._inflow, self.lower, grid.upper, self.h, shape
-        )
+        self.planes = self._boundary_planes()
         interior = [s for s in scene.sources if s.kind != "uniform"]
         self.prim_kinds, self.prim_params = parameter_table(interior)
         self.prim_radii = np.array([max(p.core_radius, self.h) for p in interior])
@@ -196,9 +201,15 @@ class NavierStokesWind(WindField):
         # state: the three padded face arrays, pressure (warm start) and work arrays
         self.q = [np.zeros(padded_shape(shape, a)) for a in range(3)]
         self.work = [np.zeros_like(x) for x in self.q]
-        self.work2 = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
-        self.qmin = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
-        self.qmax = [np.zeros_like(x) for x in self.q] if self.advection == "maccormack" else None
+        limited = self.advection in ("maccormack", "second_order")
+        self.work2 = [np.zeros_like(x) for x in self.q] if limited else None
+        self.qmin = [np.zeros_like(x) for x in self.q] if limited else None
+        self.qmax = [np.zeros_like(x) for x in self.q] if limited else None
+        second = self.advection == "second_order"
+        self.old = [np.zeros_like(x) for x in self.q] if second else None  # u^(n-1)
+        self.rhs_w = [np.zeros_like(x) for x in self.q] if second else None
+        self._pressure_scale = 0.0  # converts psi into (dt/2) grad p for the next step
+        self._last_dt = 0.0
         self.free_static = [np.zeros(x.shape, np.uint8) for x in self.q]
         for a in range(3):
             boundaries.free_faces(a, self.kinds, self.solid, self.free_static[a])
@@ -210,6 +221,10 @@ class NavierStokesWind(WindField):
         self._set_weights()
         self.psi = np.zeros(shape)
         self.rhs = np.zeros(shape)
+        self.smagorinsky_length2 = np.full(
+            shape[2], (float(params.smagorinsky_constant) * self.h) ** 2
+        )
+        self.nu_t = self._eddy_viscosity_model(float(params.mixing_length_limit))
         self._u_cell = np.zeros((*shape, 3))
         self._cell_valid = False
         self._stats: dict[str, float] = {}
@@ -236,11 +251,22 @@ class NavierStokesWind(WindField):
         return kinds.astype(np.int64)
 
     def _inflow(self, points, face) -> np.ndarray:
-        """Inflow wind at points of ``face``: uniform sources only where they blow in."""
+        """Inflow wind at points of ``face`` at the backend's time: uniform sources only
+        where they blow in, with their synthetic turbulence if they carry one."""
         b = face // 2
         n_out = -1.0 if face % 2 == 0 else 1.0
         chosen = [s for s in self.scene.sources if s.kind != "uniform" or s.velocity[b] * n_out < 0]
-        return superpose(chosen, points)
+        wind = superpose(chosen, points)
+        for source, fluctuation in self.fluctuations:
+            if source in chosen:
+                wind += fluctuation(points, self.time) * profile_scale(source, points)[:, None]
+        return wind
+
+    def _boundary_planes(self):
+        return boundaries.boundary_planes(
+            self.kinds, self.walls, self._inflow, self.lower, self.grid.upper, self.h,
+            self.grid.shape,
+        )  # fmt: skip
 
     def _mass_sources(self, interior) -> np.ndarray:
         """Target h div u per cell: each source (sink) emits (draws) m over its core."""
@@ -274,6 +300,7 @@ class NavierStokesWind(WindField):
             self.q[a][...] = np.asarray(field(pts.reshape(-1, 3)))[:, a].reshape(pts.shape[:3])
         self._apply_boundaries(set_normal=True)
         self._project()
+        self._pressure_scale, self._last_dt = 0.0, 0.0  # no earlier time level
 
     def _faces_touching_solid(self, a) -> np.ndarray:
         """Flat indices of the faces of component a next to a body (model: bodies are rigid)."""
@@ -306,12 +333,13 @@ class NavierStokesWind(WindField):
         for a in range(3):
             boundaries.fill_boundary(arrays[a], a, self.kinds, self.planes[a], True)
 
-    def _carry(self, dt_h, src, out, bounds=False):
-        """out[a] = src[a](x - d) for the three components, d the backtrace of the current
-        velocity over dt_h = dt / h; with ``bounds`` also the limiter's qmin/qmax."""
+    def _carry(self, dt_h, src, out, bounds=False, velocity=None):
+        """out[a] = src[a](x - d) for the three components, d the backtrace of ``velocity``
+        (default: the current one) over dt_h = dt / h; with ``bounds`` also the limiter's
+        qmin/qmax."""
         qmin, qmax = (self.qmin, self.qmax) if bounds else (out, out)
         advection.advect(
-            *self.q, self.cells, self.periodic, dt_h, numba.get_num_threads(),
+            *(velocity or self.q), self.cells, self.periodic, dt_h, numba.get_num_threads(),
             tuple(src), tuple(out), tuple(qmin), tuple(qmax), bounds,
         )  # fmt: skip
 
@@ -329,6 +357,98 @@ class NavierStokesWind(WindField):
                 )
         self.q, self.work = self.work, self.q
         self._apply_boundaries(set_normal=True)
+
+    def _advect_diffuse_second_order(self, dt) -> int:
+        """Advection and viscosity of the second-order step (``wind.advection=second_order``).
+
+        The trapezoidal rule along the characteristic from (X, t^n) to (x, t^n+1),
+
+            u^n+1(x) = u^n(X) - dt/2 [grad p^n(X) + grad p^n+1(x)]
+                       + nu dt/2 [lap u^n(X) + lap u^n+1(x)],
+
+        is second order in time (the semi-Lagrangian Crank-Nicolson projection scheme,
+        e.g. Xiu & Karniadakis 2001): w = u^n - (dt/2) grad p^n + nu dt/2 lap u^n is carried
+        by limited MacCormack along backtraces of the midpoint velocity u^n+1/2 = 3/2 u^n -
+        1/2 u^n-1, the implicit half of the viscosity is solved (alpha = nu dt / (2 h^2)),
+        and the projection supplies (dt/2) grad p^n+1 as the gradient of its psi, which the
+        next step subtracts again. The first step has no previous pressure or velocity: its
+        psi is a full step's dt grad p, halved for the second step."""
+        dt_h = dt / self.h
+        if self._last_dt == 0.0:  # first step: u^n-1 = u^n
+            for a in range(3):
+                self.old[a][...] = self.q[a]
+        for a in range(3):
+            np.multiply(self.old[a], -0.5, out=self.old[a])  # u^n+1/2 = 3/2 u^n - 1/2 u^n-1
+            self.old[a] += 1.5 * self.q[a]
+        scale = self._pressure_scale * (dt / self._last_dt if self._last_dt else 0.0)
+        beta = 0.5 * self.viscosity * dt / self.h**2
+        w = self.rhs_w
+        for a in range(3):
+            diffusion.explicit_step(self.q[a], w[a], beta, self.axes, self.free[a])
+            if scale != 0.0:
+                subtract_gradient(w[a], a, self.psi, self.free[a], self.periodic, scale)
+        self._fill(w)
+        self._carry(dt_h, w, self.work2, bounds=True, velocity=self.old)
+        self._fill(self.work2)
+        self._carry(-dt_h, self.work2, self.work, velocity=self.old)
+        for a in range(3):
+            advection.maccormack_correct_smooth(
+                w[a], self.work2[a], self.work[a], self.qmin[a], self.qmax[a], self.axes,
+                self.work[a],
+            )  # fmt: skip
+        # u^n becomes u^n-1 of the next step; the midpoint field is scratch from here
+        self.old, self.q, self.work = self.q, self.work, self.old
+        self._apply_boundaries(set_normal=True)
+        sweeps = self._diffuse(0.5 * dt)
+        self._pressure_scale = 1.0 if self._last_dt else 0.5
+        self._last_dt = dt
+        return sweeps
+
+    def _eddy_viscosity_model(self, limit: float) -> np.ndarray | None:
+        """nu_t per cell: fixed for ``mixing_length`` (the undisturbed wind's shear at each
+        layer, :func:`.turbulence.surface_layer_viscosity`), updated every step for
+        ``smagorinsky``, None without turbulence or where the wind has no shear."""
+        if self.turbulence == "none":
+            return None
+        if self.turbulence == "smagorinsky":
+            return np.zeros(self.grid.shape)
+        z = self.grid.axes()[2] - self.lower[2]
+        eps = 1e-3 * self.h
+        column = np.zeros((len(z), 3))
+        column[:, 2] = self.grid.axes()[2]
+        column[:, :2] = 0.5 * (self.lower[:2] + np.asarray(self.grid.upper)[:2])
+        up, down = column.copy(), column.copy()
+        up[:, 2] += eps
+        down[:, 2] -= eps
+        shear = np.linalg.norm(
+            superpose(self.scene.sources, up) - superpose(self.scene.sources, down), axis=1
+        ) / (2 * eps)
+        layers = turbulence.surface_layer_viscosity(z, shear, limit)
+        if not np.any(layers > 0):
+            return None
+        return np.where(self.solid.astype(bool), 0.0, layers[None, None, :])
+
+    def _eddy_diffusion(self, dt) -> tuple[float, int]:
+        """Eddy viscosity of the mean flow (:mod:`.turbulence`), explicit substeps;
+        returns (largest nu_t in m^2/s, substeps taken)."""
+        if self.nu_t is None:
+            return 0.0, 0
+        if self.turbulence == "smagorinsky":
+            turbulence.eddy_viscosity(
+                *self.q, self.solid, self.axes, self.h, self.smagorinsky_length2, self.nu_t
+            )
+        peak = float(self.nu_t.max())
+        stable = turbulence.SUBSTEP_LIMIT / (2 * int(self.axes.sum()))
+        substeps = max(1, int(np.ceil(peak * dt / self.h**2 / stable)))
+        dt_h2 = dt / substeps / self.h**2
+        for _ in range(substeps):
+            for a in range(3):
+                turbulence.eddy_diffusion(
+                    self.q[a], a, self.nu_t, self.axes, dt_h2, self.free[a], self.work[a]
+                )
+            self.q, self.work = self.work, self.q
+            self._apply_boundaries(set_normal=True)
+        return peak, substeps
 
     def _forces(self, dt):
         forced = bool(np.any(self.body_force != 0.0))
@@ -448,13 +568,22 @@ class NavierStokesWind(WindField):
 
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
+        self.time += dt
+        if self.fluctuations:  # the inflow of this step's end
+            self.planes = self._boundary_planes()
         marked = self._couple(obstacles)
         self._forces(dt)
+        te = time.perf_counter()
+        nu_max, substeps = self._eddy_diffusion(dt)
         t1 = time.perf_counter()
-        self._advect(dt)
-        t2 = time.perf_counter()
-        sweeps = self._diffuse(dt)
-        t3 = time.perf_counter()
+        if self.advection == "second_order":
+            sweeps = self._advect_diffuse_second_order(dt)
+            t2 = t3 = time.perf_counter()  # one phase: advect holds both
+        else:
+            self._advect(dt)
+            t2 = time.perf_counter()
+            sweeps = self._diffuse(dt)
+            t3 = time.perf_counter()
         iters, res, rhs_norm = self._project()
         t4 = time.perf_counter()
         peak, squares, count = divergence_norms(*self.q, self.target, self.solid)
@@ -469,7 +598,10 @@ class NavierStokesWind(WindField):
             "diffusion_sweeps": float(sweeps),
             "cfl": float(speed * dt / self.h),
             "cloth_cells": float(marked),
-            "couple_seconds": t1 - t0,
+            "eddy_viscosity_max": nu_max,
+            "eddy_substeps": float(substeps),
+            "couple_seconds": te - t0,
+            "eddy_seconds": t1 - te,
             "advect_seconds": t2 - t1,
             "diffuse_seconds": t3 - t2,
             "project_seconds": t4 - t3,

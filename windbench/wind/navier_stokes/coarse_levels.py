@@ -1,19 +1,17 @@
-"""The small coarse levels of the pressure multigrid (:mod:`.pressure`), run as one compiled
+"""The small coarse levels of the pressure multigrid (:mod:`.multigrid`), run as one compiled
 call per visit.
 
-On the levels below ``pressure.SERIAL_CELLS`` cells a thread start costs more than the
-work, and so did everything around the arithmetic: a kernel call per level and smoothing
-pass (about 150 calls per step at 64^3, 5-7 us each before any work) and, inside the row
-kernels, the per-row set-up (neighbour views, the two end cells), which on rows of 4-16
-cells cost 11-27 ns per cell update against 1.5 ns on the fine level. Here those levels
+On the levels below ``multigrid.SERIAL_CELLS`` cells a thread start, a kernel call per
+level and smoothing pass, and the per-row set-up of the row kernels cost more than the
+arithmetic. Here those levels
 share flat float32 arrays in natural (C) order, one block per level, and every cell
 carries the global indices of its six neighbours (wrapped on periodic axes; beyond a
 non-periodic face the *zero slot*, the last element, which stays 0: the ghost x = 0 of
-:mod:`.pressure`), its six face weights (coarse weights with their (h/H)^2 factor), its
+:mod:`.multigrid`), its six face weights (coarse weights with their (h/H)^2 factor), its
 diagonal and 1/diagonal. One call (:func:`run_cycle`) then runs the whole cycle below a
 level from a schedule written once (:func:`schedule`).
 
-The arithmetic is that of :mod:`.pressure` (McAdams et al. 2010 as used there): red-black
+The arithmetic is that of :mod:`.multigrid` (McAdams et al. 2010 as used there): red-black
 Gauss-Seidel x_c <- x_c + OMEGA ((b_c + sum_f w_f x_nb) / diag_c - x_c) on cells with an
 open face (cells without one are left alone), the residual b - A x restricted to the parent
 cell as the mean of its children, the coarse correction prolonged by injection; the
@@ -23,6 +21,8 @@ written out with numpy).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -91,11 +91,13 @@ def prolong(x, parent, first, count):
 
 
 @njit(cache=True)
-def run_cycle(ops, x, b, nb, w, diag, inv, parent, order, ranges, blocks, mean, sweeps, omega):
+def run_cycle(ops, x, b, tables, sweeps, omega):
     """Run the schedule ``ops`` (rows (operation, level)): PRE = ``sweeps[0]`` sweeps, the
     residual restricted to the next level; POST = the correction prolonged from the next
     level, ``sweeps[0]`` sweeps in reverse order; COARSEST = ``sweeps[1]`` sweeps each way.
-    ``blocks[l]`` = (first cell, cell count) of level l."""
+    ``tables`` are the levels' :class:`CellTables`; ``blocks[l]`` = (first cell, cell count)
+    of level l."""
+    nb, w, diag, inv, parent, order, ranges, blocks, mean = tables
     for n in range(ops.shape[0]):
         op, lev = ops[n, 0], ops[n, 1]
         if op == PRE:
@@ -110,6 +112,22 @@ def run_cycle(ops, x, b, nb, w, diag, inv, parent, order, ranges, blocks, mean, 
         else:
             _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[1], False, omega)
             _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[1], True, omega)
+
+
+class CellTables(NamedTuple):
+    """The flat per-cell tables of the small levels (see module docstring): neighbour
+    indices, face weights, diagonal and its inverse, parent cell, the cells of each colour
+    in order and their ranges, each level's block of cells and its mean flag."""
+
+    nb: np.ndarray
+    w: np.ndarray
+    diag: np.ndarray
+    inv: np.ndarray
+    parent: np.ndarray
+    order: np.ndarray
+    ranges: np.ndarray
+    blocks: np.ndarray
+    mean: np.ndarray
 
 
 def schedule(first: int, last: int, w_levels) -> np.ndarray:
@@ -221,7 +239,8 @@ class CoarseLevels:
 
     def cycle(self):
         """One cycle from the first of these levels, from its current x."""
-        run_cycle(
-            self.ops, self.x, self.b, self.nb, self.w, self.diag, self.inv, self.parent,
-            self.order, self.ranges, self.blocks, self.mean, self.sweeps, self.omega,
+        tables = CellTables(
+            self.nb, self.w, self.diag, self.inv, self.parent, self.order, self.ranges,
+            self.blocks, self.mean,
         )  # fmt: skip
+        run_cycle(self.ops, self.x, self.b, tables, self.sweeps, self.omega)

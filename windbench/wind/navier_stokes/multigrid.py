@@ -1,64 +1,40 @@
-"""Pressure projection (paper §4.1.1, the Helmholtz-Hodge step of Stam 1999/2003):
-conjugate gradients preconditioned by one geometric multigrid cycle (MGPCG, McAdams,
-Sifakis and Teran 2010), on a face-weighted cell mask.
+"""The Poisson solve of the projection (paper §4.1.1, the Helmholtz-Hodge step of Stam
+1999): conjugate gradients preconditioned by one geometric multigrid cycle (MGPCG,
+McAdams, Sifakis and Teran 2010), on a face-weighted cell mask.
 
 The unknown is psi = p dt / (rho h) on cell centres; the projected face velocity is
-u_f - (psi_+ - psi_-). Each face carries a weight w_f in {0, 1}: 1 where air may cross
-(both sides air, the face not blocked by cloth), 0 where the normal velocity is prescribed
-(walls, inflow, bodies, cloth). Outflow/opening faces have w = 1 and a ghost psi = 0
-(pressure zero outside). Zero divergence in every air cell then reads
+u_f - (psi_+ - psi_-). Each face carries a weight w_f in {0, 1}: 1 where air may cross,
+0 where the normal velocity is prescribed (walls, inflow, bodies, cloth); outflow and
+opening faces have w = 1 and a ghost psi = 0. Zero divergence in every air cell reads
 
     (A psi)_c = sum_faces w_f (psi_c - psi_nb) = b_c = -(sum of outward face velocities)_c,
 
-a symmetric positive (semi-)definite system. Changing which faces are open is only a
-rewrite of the weight arrays, so bodies and cloth may change every step at the cost of
-one O(cells) pass (:func:`MultigridPoisson.set_weights`).
+a symmetric positive (semi-)definite system; changing which faces are open only rewrites
+the weights (:meth:`MultigridPoisson.set_weights`).
 
-Multigrid: cell-centred, axes with an even number (>= 4) of cells halved per level;
-coarse face weight = mean of the fine face weights it covers, operator re-discretised
-with the coarse spacing (coefficient (h/H)^2 per axis); restriction = mean of the
-children, prolongation = injection (the transpose up to the factor 8), red-black
-successive over-relaxation smoothing, x_c += omega ((b_c + sum_f w_f x_nb) / diag - x_c)
-with omega = ``OMEGA`` = 1.1 on the coarse levels and ``FINE_OMEGA`` = 1 (Gauss-Seidel) on
-the finest (two sweeps down, the same in reverse order up, so the cycle is a symmetric
-positive definite preconditioner as CG needs, for any 0 < omega < 2). The coarsest level
-gets many symmetric sweeps. The first two coarse levels correct twice from the next level
-(a W there, ``W_LEVELS``), the others once (a V): 5.00 / 5.00 / 5.07 iterations per step
-at 32^3 / 64^3 / 128^3 on the fence (mean over 29 steps of ``experiment=scaling``). The
-whole cycle runs in single precision (``PRECONDITIONER_DTYPE``) while CG stays in double: the
-same iteration counts and a pressure within 1e-8 (relative) of an all-float64 solve, in
-15% less time at 128^3 on one core (A/B in one process; tested: it still reaches a
-relative residual of 1e-10).
+Multigrid: cell-centred, axes with an even number (>= 4) of cells halved per level; the
+coarse face weight is the mean of the fine ones it covers, the operator re-discretised
+with the coarse spacing (coefficient (h/H)^2 per axis); restriction is the mean of the
+children, prolongation injection (its transpose up to a factor 8); red-black successive
+over-relaxation x_c += omega ((b_c + sum_f w_f x_nb) / diag - x_c), omega = ``OMEGA`` on
+the coarse levels and ``FINE_OMEGA`` = 1 on the finest, the same sweeps in reverse order on
+the way up, so that the cycle is the symmetric positive definite preconditioner CG needs.
+The first coarse levels correct twice (a W, ``W_LEVELS``), the others once (a V); the
+cycle runs in single precision (``PRECONDITIONER_DTYPE``), CG in double. The levels below
+``SERIAL_CELLS`` cells run as one compiled call on flat tables (:mod:`.coarse_levels`).
 
-Speed: the kernels work row by row along z. A row's x and y neighbour rows are found
-once, as views (wrapped on periodic axes; beyond a wall or an opening another row, with
-coefficient 0: the ghost x = 0), so each cell is plain contiguous reads. Each row is
-classified once per weight change (:func:`classify_rows`): ALL_OPEN rows (most of the
-air) use the constant 7-point stencil without reading any weight, ROW_CONSTANT rows (the
-rows along the domain faces, coarse rows of constant fractional weights) per-row
-coefficients, GENERAL rows (cut by a body or cloth) the face weights cell by cell; the two
-end cells of every row take their coefficients from a compact table. The classes run in
-loops of their own, the ALL_OPEN rows with neighbour views taken without a condition,
-which made the smoother about 1.3 times as fast as one loop over all rows (2.7 -> 2.05 ns
-per cell update at 64^3, one core, A/B); the ROW_CONSTANT class (the domain-face rows had
-gone through the weighted loop) took the projection from 28.7 to 26.1 ms at 64^3 and
-from 211 to 196 ms at 128^3 (one core, minimum of 12 and 8 steps, A/B in one process; the
-operator gives the same bits, the smoother's fast-math float32 rounding differs: the
-velocity 3.6e-13 apart, relative, after 22 steps at 32^3). Stores
-are written out in the loops: numba made a loop with an inlined storing helper three to
-four times slower. The
-levels below ``SERIAL_CELLS`` cells run as one compiled call per visit on flat per-cell
-tables (:mod:`.coarse_levels`): there the calls and the per-row set-up, not the arithmetic,
-had cost the time (projection 11.3 -> 8.8 ms at 32^3, 31.7 -> 28.0 ms at 64^3, one core,
-A/B in one process). CG's vector
-updates are fused (:func:`cg_update`) and every reduction sums by planes, then over planes
-in order, so the numbers do not depend on the thread count. Without any pressure boundary (all
-walls/periodic) the constant is removed from the right-hand side and from every
-preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2 (relative residual),
-warm-started from the previous step's pressure.
+The kernels work row by row along z, with each row classified once per weight change
+(:func:`classify_rows`): ALL_OPEN rows use the constant 7-point stencil, ROW_CONSTANT rows
+per-row coefficients, GENERAL rows the face weights cell by cell. Every reduction sums by
+planes, then over the planes in order (:func:`ordered_sum`), so the numbers do not
+depend on the thread count. Without any pressure boundary the constant is removed from
+the right-hand side and each preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2,
+warm-started from the previous step's psi.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -217,10 +193,11 @@ def classify_rows(wx, wy, wz, coef, periodic, rows, row_coef, ends):
 
 
 @njit(cache=True)
-def _operator_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out, residual):
+def _operator_plane(x, b, level, i, out, residual):
     """out = (b - A x)[i] if ``residual``, else (A x)[i] (b unread); ``out`` is a plane (a
-    view of the output's plane i, or scratch). Each row class in a loop of its own (see
-    :func:`_gs_plane`)."""
+    view of the output's plane i, or scratch); ``level`` the level's :class:`Stencil`.
+    Each row class in a loop of its own (see :func:`_gs_plane`)."""
+    wx, wy, wz, periodic, rows, row_coef, ends, coef = level
     sign = 1.0 if residual else -1.0
     c0, c1, c2 = coef[0], coef[1], coef[2]
     d_uniform = 2.0 * (c0 + c1 + c2)
@@ -269,33 +246,34 @@ def _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, i, j, residual):
 
 
 @njit(cache=True, parallel=True)
-def residual(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
+def residual(x, b, level, out):
     """out = b - A x; returns out . out, summed as :func:`dot` does (in the same pass)."""
     partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        _operator_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], True)
+        _operator_plane(x, b, level, i, out[i], True)
         partial[i] = _plane_dot(out, out, i)
     return ordered_sum(partial)
 
 
 @njit(cache=True, parallel=True)
-def apply_operator(x, wx, wy, wz, periodic, rows, row_coef, ends, coef, out):
+def apply_operator(x, level, out):
     """out = A x = sum_f c w_f (x_c - x_nb); returns x . A x, summed as :func:`dot` does
     (plane by plane while the plane is in cache: one pass less per CG iteration)."""
     partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        _operator_plane(x, x, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, out[i], False)
+        _operator_plane(x, x, level, i, out[i], False)
         partial[i] = _plane_dot(x, out, i)
     return ordered_sum(partial)
 
 
 @njit(cache=True, fastmath=FAST_MATH)
-def _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, colour):
+def _gs_plane(x, b, level, i, colour):
     """One colour of plane i. Cells of one colour do not neighbour each other, so the
     order within a colour does not matter: each row class in a loop of its own (with the
     other rows' code in the same loop the ALL_OPEN rows ran twice as slow), ALL_OPEN in
     functions of their own. The stores are written out in the loops: an inlined helper
     that stores into an array made the loop three to four times slower (numba 0.68)."""
+    wx, wy, wz, periodic, rows, row_coef, ends, coef = level
     if coef[6] == 1.0:
         _constant_rows_gauss_seidel(x, b, rows, ends, coef, i, colour)
     else:
@@ -387,9 +365,7 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
 
 
 @njit(cache=True, parallel=True, fastmath=FAST_MATH)
-def gauss_seidel(
-    x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, colour, halves, r, partial
-):
+def gauss_seidel(x, b, level, colour, halves, r, partial):
     """``halves`` half sweeps of red-black SOR (the level's omega, coef[6]) on A x = b,
     alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first), planes
     in parallel: a cycle's smoothing on one level is one call (the Python loop of one call per half
@@ -404,24 +380,25 @@ def gauss_seidel(
     without a pass of its own (0.13 ms per iteration at 64^3).
     """
     nx = x.shape[0]
+    periodic = level[3]
     last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
     with_dot = partial.shape[0] == nx
     for half in range(halves):
         c = (colour + half) % 2
         final = with_dot and half == halves - 1
         for i in prange(last):
-            _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
+            _gs_plane(x, b, level, i, c)
             if final:
                 partial[i] = _plane_dot(r, x, i)
         for i in range(last, nx):
-            _gs_plane(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, i, c)
+            _gs_plane(x, b, level, i, c)
             if final:
                 partial[i] = _plane_dot(r, x, i)
     return ordered_sum(partial) if with_dot else 0.0
 
 
 @njit(cache=True, parallel=True)
-def residual_restrict(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, ratio, coarse):
+def residual_restrict(x, b, level, ratio, coarse):
     """coarse[I,J,K] = mean of the residual b - A x over the fine cells it covers (ratio 1
     or 2 per axis). The residual of the fine planes under one coarse plane goes to a
     scratch block and straight into the mean: it is never stored as a whole field (a
@@ -432,9 +409,7 @@ def residual_restrict(x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, ra
     for I in prange(n0):
         fine = np.empty((r0, x.shape[1], x.shape[2]), x.dtype)
         for a in range(r0):
-            _operator_plane(
-                x, b, wx, wy, wz, periodic, rows, row_coef, ends, coef, r0 * I + a, fine[a], True
-            )
+            _operator_plane(x, b, level, r0 * I + a, fine[a], True)
         for J in range(n1):
             coarse[I, J, :] = 0.0
             for a in range(r0):
@@ -575,6 +550,21 @@ def remove_mean(x, active):
             x.flat[idx] -= mean
 
 
+class Stencil(NamedTuple):
+    """What the operator and smoother kernels read of a level: face weights per axis, the
+    periodic flags, each row's class and coefficients, the end cells' table, and the
+    per-axis coefficients with the smoother's factors (:class:`_Level`)."""
+
+    wx: np.ndarray
+    wy: np.ndarray
+    wz: np.ndarray
+    periodic: np.ndarray
+    rows: np.ndarray
+    row_coef: np.ndarray
+    ends: np.ndarray
+    coef: np.ndarray
+
+
 class _Level:
     """One multigrid level: face weights, coefficient per axis, work arrays."""
 
@@ -603,9 +593,11 @@ class _Level:
         self.small = np.prod(self.shape) < SERIAL_CELLS
         self.partial = np.zeros(nx)  # per-plane sums of the smoother's dot
 
-    def args(self):
-        w, p = self.w, self.periodic
-        return (w[0], w[1], w[2], p, self.rows, self.row_coef, self.ends, self.coef)
+    def args(self) -> Stencil:
+        w = self.w
+        return Stencil(
+            w[0], w[1], w[2], self.periodic, self.rows, self.row_coef, self.ends, self.coef
+        )
 
     def classify_rows(self):
         """After the weights change: the rows whose interior cells have every face open, and
@@ -616,7 +608,7 @@ class _Level:
         """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call); with
         ``r`` (float64, the level's shape) returns r . x after them (:func:`gauss_seidel`)."""
         r, partial = NO_DOT if r is None else (r, self.partial)
-        return gauss_seidel(x, b, *self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
+        return gauss_seidel(x, b, self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
 
 
 class MultigridPoisson:
@@ -722,7 +714,7 @@ class MultigridPoisson:
         lev = self.levels[n]
         nxt = self.levels[n + 1]
         lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
-        residual_restrict(lev.x, lev.b, *lev.args(), lev.ratio, nxt.b)
+        residual_restrict(lev.x, lev.b, lev.args(), lev.ratio, nxt.b)
         nxt.x[...] = 0.0
         for _ in range(2 if n in W_LEVELS else 1):
             self._cycle(n + 1)
@@ -739,7 +731,7 @@ class MultigridPoisson:
         bnorm = np.sqrt(dot(b, b))
         self.rhs_norm = float(bnorm)
         r, p, q = self.r, self.p, self.q
-        rnorm = np.sqrt(residual(x, b, *fine.args(), r))
+        rnorm = np.sqrt(residual(x, b, fine.args(), r))
         if bnorm == 0.0 or bnorm <= atol:
             x[...] = 0.0
             return 0, 0.0
@@ -750,7 +742,7 @@ class MultigridPoisson:
         it = 0
         while it < max_iterations:
             it += 1
-            alpha = rz / apply_operator(p, *fine.args(), q)  # p . A p
+            alpha = rz / apply_operator(p, fine.args(), q)  # p . A p
             rnorm = np.sqrt(cg_update(alpha, p, q, x, r, fine.b))
             if rnorm <= tol * bnorm:
                 break

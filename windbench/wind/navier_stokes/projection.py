@@ -79,8 +79,10 @@ def max_abs(q):
 
 
 @njit(cache=True, parallel=True)
-def subtract_gradient(q, a, psi, free, periodic):
-    """q_f -= psi_+ - psi_- on the free faces of component a (ghost psi = 0 at openings)."""
+def subtract_gradient(q, a, psi, free, periodic, scale=1.0):
+    """q_f -= scale (psi_+ - psi_-) on the free faces of component a (ghost psi = 0 at
+    openings). ``scale`` 1 is the projection itself; the second-order step also subtracts
+    the previous step's pressure gradient with the scale that makes it (dt/2) grad p."""
     nx, ny, nz = psi.shape
     n_a = psi.shape[a]
     P0, P1, P2 = q.shape
@@ -98,7 +100,7 @@ def subtract_gradient(q, a, psi, free, periodic):
                     minus = psi[im % nx, jm % ny, km % nz]
                 else:
                     minus = 0.0
-                q[I, J, K] -= plus - minus  # u_f <- u_f - (psi_+ - psi_-)
+                q[I, J, K] -= scale * (plus - minus)  # u_f <- u_f - (psi_+ - psi_-)
 
 
 @njit(cache=True)

@@ -1,0 +1,283 @@
+"""The measured comparison: accuracy against cost, lee error with the reference's own
+uncertainty, the fence wake against shelter measurements, and the steady windows.
+
+Every statistic here comes from a run's steady window (:mod:`windbench.report.collect`);
+``lee_error`` is measured against the scene's reference (:mod:`windbench.report.lee`),
+whose grid-convergence index is drawn as a band: errors inside it are indistinguishable
+from the reference's own error.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from windbench.report.collect import display_path
+from windbench.report.figures import Drawn, Missing, _color, _figure
+from windbench.report.lee import Reference
+
+COST_X = "seconds_per_simulated_second"
+RESOLUTION_MARKERS = {16: "v", 20: "<", 24: ">", 32: "o", 48: "s", 64: "D", 128: "*", 256: "P"}
+# Relative wind speed behind dense windbreaks (optical porosity < 20 %) at about half
+# their height, as summarised by Heisler & DeWalle (1988, Agric. Ecosyst. Environ.
+# 22/23: 41-69): an approximate range read from their review, for plausibility only.
+SHELTER_RANGE = pd.DataFrame(
+    {"distance_H": [2, 5, 10, 15, 20], "low": [0.05, 0.15, 0.45, 0.65, 0.8]}
+).assign(high=[0.3, 0.35, 0.65, 0.85, 0.95])
+SHELTER_SOURCE = "dense windbreaks, Heisler & DeWalle (1988), approximate range"
+
+
+def compared(df: pd.DataFrame) -> pd.DataFrame:
+    """Complete runs with a lee error that are not levels of their scene's reference."""
+    if df.empty or "lee_error" not in df:
+        return df.iloc[0:0]
+    levels = df.get("reference_level", pd.Series(False, index=df.index)).astype(bool)
+    return df[~levels & np.isfinite(df["lee_error"].astype(float))]
+
+
+def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """Mask of the points no other point beats in both cost and error (lower is better)."""
+    cost, error = np.asarray(cost, float), np.asarray(error, float)
+    front = np.ones(len(cost), dtype=bool)
+    for i in range(len(cost)):
+        better = (cost <= cost[i]) & (error <= error[i]) & ((cost < cost[i]) | (error < error[i]))
+        front[i] = not better.any()
+    return front
+
+
+def accuracy_cost_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Per scene, backend and resolution: cost per simulated second and lee error (seeds
+    and time steps: mean, with the seeds' spread), Pareto front marked per scene."""
+    d = compared(df)
+    if d.empty or COST_X not in d:
+        return pd.DataFrame()
+    keys = [k for k in ("scene", "wind", "resolution", "dt") if k in d]
+    g = d.groupby(keys, sort=True)
+    out = g.agg(
+        runs=("lee_error", "size"),
+        cost=(COST_X, "median"),
+        lee_error=("lee_error", "mean"),
+        error_min=("lee_error", "min"),
+        error_max=("lee_error", "max"),
+    ).reset_index()
+    out["pareto"] = False
+    for _, idx in out.groupby("scene").groups.items():
+        sub = out.loc[idx]
+        out.loc[idx, "pareto"] = pareto_front(sub["cost"].values, sub["lee_error"].values)
+    return out.rename(columns={"cost": "wall s per simulated s"})
+
+
+def reference_table(refs: dict[str, Reference]) -> pd.DataFrame:
+    """One row per scene: the reference, its levels and its uncertainty."""
+    rows = []
+    for scene, ref in sorted(refs.items()):
+        rows.append(
+            {
+                "scene": scene,
+                "reference": ref.run.label,
+                "file": display_path(ref.path),
+                "scheme": ref.run.config.get("wind.advection"),
+                "levels": ", ".join(str(r.settings.get("resolution")) for r in ref.levels),
+                "e21": ref.difference,
+                "order p": ref.order,
+                "p observed": ref.observed,
+                "GCI": ref.gci,
+                "converged": {True: "yes", False: "NO", None: "unknown"}[ref.converged],
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def window_table(records) -> pd.DataFrame:
+    """Per scene: flow-through time, spin-up and steady window of its complete runs."""
+    rows = []
+    for rec in records:
+        if rec.status != "complete":
+            continue
+        rows.append(
+            {
+                "scene": rec.settings.get("scene"),
+                "flow-through (s)": rec.figures.get("flow_through_time", math.nan),
+                "spin-up (s)": rec.figures.get("spinup", math.nan),
+                "window from (s)": rec.figures.get("analysis_start", math.nan),
+                "window to (s)": rec.figures.get("end_time", math.nan),
+            }
+        )
+    if not rows:
+        return pd.DataFrame()
+    d = pd.DataFrame(rows)
+    return d.groupby("scene", sort=True).agg(["min", "max"]).reset_index()
+
+
+def _scene_axes(fig, scenes):
+    cols = min(len(scenes), 3)
+    rows = math.ceil(len(scenes) / cols)
+    return [fig.add_subplot(rows, cols, i + 1) for i in range(len(scenes))]
+
+
+def _band(ax, ref: Reference | None):
+    if ref is not None and np.isfinite(ref.gci):
+        ax.axhspan(0, ref.gci, color="0.85", zorder=0)
+
+
+def _legend_below(fig, handles_axes):
+    handles, labels = {}, {}
+    for ax in handles_axes:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.setdefault(lab, h)
+            labels[lab] = lab
+    fig.legend(handles.values(), labels.values(), loc="lower center", ncol=4, fontsize=7)
+
+
+def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missing:
+    """x: wall time per simulated second, y: lee error, one panel per scene; Pareto front."""
+    title = "Accuracy against cost"
+    if table.empty:
+        return Missing("accuracy_vs_cost", title, "runs with a lee error and a reference")
+    scenes = sorted(table["scene"].unique())
+    fig = _figure(4.0 * min(len(scenes), 3), 3.4 * math.ceil(len(scenes) / 3) + 0.8)
+    axes = _scene_axes(fig, scenes)
+    for ax, scene in zip(axes, scenes, strict=True):
+        sub = table[table["scene"] == scene]
+        _band(ax, refs.get(scene))
+        for _, r in sub.iterrows():
+            ax.errorbar(
+                r["wall s per simulated s"],
+                r["lee_error"],
+                yerr=[[r["lee_error"] - r["error_min"]], [r["error_max"] - r["lee_error"]]],
+                fmt=RESOLUTION_MARKERS.get(int(r["resolution"]), "o"),
+                color=_color(r["wind"]),
+                ms=5,
+                label=r["wind"],
+            )
+        front = sub[sub["pareto"]].sort_values("wall s per simulated s")
+        ax.plot(front["wall s per simulated s"], front["lee_error"], "k--", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_title(scene, fontsize=9)
+        ax.set_xlabel("wall s per simulated s")
+        ax.set_ylabel("lee error / U")
+        ax.grid(True, which="both", alpha=0.3)
+    for res, marker in RESOLUTION_MARKERS.items():
+        if (table["resolution"] == res).any():
+            axes[0].plot([], [], marker, color="0.4", label=f"{res} cells")
+    axes[0].plot([], [], "k--", lw=0.8, label="Pareto front")
+    _legend_below(fig, axes)
+    fig.subplots_adjust(bottom=0.22, hspace=0.5, wspace=0.35)
+    caption = (
+        "Every backend and resolution as a point: wall time per simulated second (median "
+        "step over the steady window, divided by dt) against the lee error (RMS wind "
+        "difference in the lee box against the scene's reference, over U_ref); error bars "
+        "span the seeds; the dashed line joins the Pareto front (no point is both cheaper "
+        "and more accurate); the grey band is the reference's own uncertainty (GCI): an "
+        "error inside it is not resolved by the reference."
+    )
+    return Drawn("accuracy_vs_cost", title, caption, fig)
+
+
+def fig_lee_error(df: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missing:
+    """Lee error against resolution per scene and backend, with the reference's band."""
+    title = "Lee error against resolution"
+    d = compared(df)
+    if d.empty:
+        return Missing("lee_error_vs_resolution", title, "runs with a lee error and a reference")
+    scenes = sorted(d["scene"].unique())
+    fig = _figure(4.0 * min(len(scenes), 3), 3.4 * math.ceil(len(scenes) / 3) + 0.8)
+    axes = _scene_axes(fig, scenes)
+    for ax, scene in zip(axes, scenes, strict=True):
+        _band(ax, refs.get(scene))
+        for wind, g in d[d["scene"] == scene].groupby("wind", sort=True):
+            s = g.groupby("resolution")["lee_error"].agg(["mean", "min", "max"])
+            ax.errorbar(
+                s.index,
+                s["mean"],
+                yerr=[s["mean"] - s["min"], s["max"] - s["mean"]],
+                marker="o",
+                color=_color(wind),
+                label=wind,
+                capsize=2,
+            )
+        ax.set_xscale("log", base=2)
+        ax.set_title(scene, fontsize=9)
+        ax.set_xlabel("cells along the longest axis")
+        ax.set_ylabel("lee error / U")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].fill_between([], [], color="0.85", label="reference uncertainty (GCI)")
+    _legend_below(fig, axes)
+    fig.subplots_adjust(bottom=0.22, hspace=0.5, wspace=0.35)
+    caption = (
+        "Mean over time steps and seeds, bars from the smallest to the largest; grey: the "
+        "reference's grid-convergence index, below which differences are not resolved."
+    )
+    return Drawn("lee_error_vs_resolution", title, caption, fig)
+
+
+def wake_frame(records, refs: dict[str, Reference]) -> pd.DataFrame:
+    """Window-mean u/u0 behind the obstacle: per scene, backend (finest run of each, and
+    the reference) and position; long format."""
+    rows = []
+    finest: dict[tuple, object] = {}
+    ref_paths = {r.path for r in refs.values()}
+    for rec in records:
+        if rec.status != "complete" or rec.wake is None:
+            continue
+        label = "reference" if rec.path in ref_paths else rec.settings.get("wind")
+        key = (rec.settings.get("scene"), label)
+        best = finest.get(key)
+        if best is None or int(rec.settings.get("resolution") or 0) > int(
+            best.settings.get("resolution") or 0
+        ):
+            finest[key] = rec
+    for (scene, label), rec in sorted(finest.items()):
+        for dist, row in rec.wake.iterrows():
+            for height, value in row.items():
+                rows.append(
+                    {
+                        "scene": scene,
+                        "backend": label,
+                        "resolution": rec.settings.get("resolution"),
+                        "distance_H": float(dist),
+                        "height_H": float(height),
+                        "u_over_u0": float(value),
+                    }
+                )
+    return pd.DataFrame(rows)
+
+
+def fig_wake(wake: pd.DataFrame) -> Drawn | Missing:
+    """u/u0 against distance behind the fence at each height, backends and reference,
+    beside the range of shelter measurements."""
+    title = "Wake behind the fence: u/u0 at 0.25, 0.5 and 1 H"
+    if wake.empty:
+        return Missing("fence_wake", title, "fence runs: `windbench -m experiment=paper`")
+    heights = sorted(wake["height_H"].unique())
+    fig = _figure(4.0 * len(heights), 3.8)
+    axes = [fig.add_subplot(1, len(heights), i + 1) for i in range(len(heights))]
+    for ax, height in zip(axes, heights, strict=True):
+        ax.fill_between(
+            SHELTER_RANGE["distance_H"], SHELTER_RANGE["low"], SHELTER_RANGE["high"],
+            color="0.88", label=SHELTER_SOURCE,
+        )  # fmt: skip
+        for backend, g in wake[wake["height_H"] == height].groupby("backend", sort=True):
+            g = g.sort_values("distance_H")
+            ax.plot(
+                g["distance_H"], g["u_over_u0"], "o-",
+                color="k" if backend == "reference" else _color(backend),
+                label=f"{backend} ({int(g['resolution'].iloc[0])} cells)",
+            )  # fmt: skip
+        ax.axhline(0, color="0.5", lw=0.6)
+        ax.set_title(f"{height:g} H above the ground", fontsize=9)
+        ax.set_xlabel("distance behind the fence / H")
+        ax.set_ylabel("u / u0 (window mean)")
+        ax.grid(True, alpha=0.3)
+    _legend_below(fig, axes)
+    fig.subplots_adjust(bottom=0.3, wspace=0.35)
+    caption = (
+        "Time-mean wind along the flow behind the fence over the undisturbed wind at the "
+        "same height, finest run of each backend and the reference; negative values are "
+        "flow back toward the fence (recirculation). The grey band is the range of "
+        "measurements behind dense windbreaks at about half their height (Heisler & "
+        "DeWalle 1988, read approximately): a plausibility range, not a data set."
+    )
+    return Drawn("fence_wake", title, caption, fig)
