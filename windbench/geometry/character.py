@@ -34,12 +34,12 @@ ALPHA = np.radians(30.0)  # the arms' angle from the vertical
 SHOULDER = np.array([0.0, 0.21, 1.40])  # the right shoulder joint (y > 0); the left mirrored
 ARM = np.array([0.0, np.sin(ALPHA), -np.cos(ALPHA)])  # down the right arm
 EASE = 0.025  # m between the shirt and the skin
-HEM, COLLAR, SLEEVE = 0.9, 1.49, 0.25  # m: hem and collar heights, cuff from the shoulder joint
+HEM, COLLAR, SLEEVE = 0.9, 1.53, 0.25  # m: hem and collar heights, cuff from the shoulder joint
 BODY_SPACING, GARMENT_SPACING = 0.01, 0.018  # m: marching-cubes lattices
 SMOOTHING_PASSES = 40
 CUFF_REACH = 0.085  # m from the arm axis: the cuff cuts the sleeve, not the torso
 
-# (a, b, radius, blend k) in metres; parts with y != 0 are mirrored to -y
+# (a, b, radius, blend k) in metres; parts off y = 0 are mirrored to -y (union_field)
 TORSO = (
     ((0.0, 0.08, 0.95), (0.0, -0.08, 0.95), 0.11, 0.04),  # hips
     ((0.0, 0.05, 0.95), (0.0, 0.05, 1.28), 0.105, 0.04),  # flanks
@@ -74,21 +74,16 @@ def smin(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
     return b + s * (a - b) - k * s * (1.0 - s)
 
 
-def _mirrored(parts):
-    out = []
-    for a, b, r, k in parts:
-        out.append((a, b, r, k))
-        if a[1] != 0.0 or b[1] != 0.0:
-            out.append(((a[0], -a[1], a[2]), (b[0], -b[1], b[2]), r, k))
-    return out
-
-
 def union_field(p: np.ndarray, parts) -> np.ndarray:
-    """Smooth union of the capsules ``parts`` (and their mirror images) at points p."""
-    d = np.full(p.shape[:-1], np.inf)
-    for a, b, r, k in _mirrored(parts):
+    """Smooth union of the capsules ``parts`` and of the mirror image (y -> -y) of each part
+    off the plane y = 0. A part is first joined with its image (smin is symmetric in its
+    arguments), so the field is exactly symmetric left to right."""
+    d = None
+    for a, b, r, k in parts:
         c = capsule(p, a, b, r)
-        d = c if np.all(np.isinf(d)) else smin(d, c, k)
+        if a[1] != -b[1]:  # not its own mirror image
+            c = smin(c, capsule(p, (a[0], -a[1], a[2]), (b[0], -b[1], b[2]), r), k)
+        d = c if d is None else smin(d, c, k)
     return d
 
 
@@ -248,7 +243,7 @@ def smooth(field, vertices: np.ndarray, triangles: np.ndarray, cuts=(), passes=S
     bdeg = _neighbour_means(triangles, x.shape[0], x)[2]
     on = np.stack([np.abs((x - o) @ nrm) < 1e-9 for o, nrm, _ in cuts] or [bdeg < 0], axis=1)
     on &= (bdeg > 0)[:, None]  # the boundary vertices lying on a cut
-    fixed = on.sum(axis=1) >= 2  # corners where two cuts meet
+    fixed = on.sum(axis=1) >= 2  # corners where two cuts meet: projected only
     for _ in range(passes):
         mean, bmean, _ = _neighbour_means(triangles, x.shape[0], x)
         target = np.where(on.any(axis=1)[:, None], bmean, mean)
@@ -257,10 +252,9 @@ def smooth(field, vertices: np.ndarray, triangles: np.ndarray, cuts=(), passes=S
         step = 0.5 * (target - x)
         step -= np.einsum("ij,ij->i", step, n)[:, None] * n
         x[~fixed] += step[~fixed]
-        for _ in range(3):  # back onto the level set, and onto the cuts
+        for _ in range(3):  # back onto the level set, and onto the cuts (corners: both)
             g = _gradient(field, x)
-            move = (field(x) / np.einsum("ij,ij->i", g, g))[:, None] * g
-            x[~fixed] -= move[~fixed]
+            x -= (field(x) / np.einsum("ij,ij->i", g, g))[:, None] * g
             for c, (o, nrm, _) in enumerate(cuts):
                 x[on[:, c]] -= ((x[on[:, c]] - o) @ nrm)[:, None] * nrm
     return x
