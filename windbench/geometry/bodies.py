@@ -295,9 +295,11 @@ def table_distance(table, b, px, py, pz, normal):
 @njit(cache=True)
 def union_distance_point(table, px, py, pz, normal):
     """Signed distance to the nearest body of a :class:`BodyTable`, normal of that one."""
+    normal[0], normal[1], normal[2] = 0.0, 0.0, 1.0
+    if table.kinds.shape[0] == 1:  # one body: no scratch to allocate (a contact's hot path)
+        return table_distance(table, 0, px, py, pz, normal)
     best = np.inf
     tmp = np.empty(3)
-    normal[0], normal[1], normal[2] = 0.0, 0.0, 1.0
     for b in range(table.kinds.shape[0]):
         d = table_distance(table, b, px, py, pz, tmp)
         if d < best:
