@@ -17,13 +17,13 @@ collision margin.
 
 from __future__ import annotations
 
-import csv
 import time
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from experiments.bench_cloth import write_rows
 from windbench.geometry.sdf import lattice_distance, sdf_lattice
 
 OUT = Path(__file__).resolve().parent / "results" / "sdf_accuracy.csv"
@@ -96,13 +96,7 @@ def main() -> None:
                     f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()
                 )
             )
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    with open(OUT, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: f"{v:.4g}" if isinstance(v, float) else v for k, v in row.items()})
-    print(f"wrote {OUT}")
+    write_rows(rows, OUT, OUT)
 
 
 if __name__ == "__main__":
