@@ -7,5 +7,7 @@ from setuptools import find_packages, setup
 setup(
     packages=[*find_packages(include=["windbench", "windbench.*"]), "windbench.conf"],
     package_dir={"windbench.conf": "conf"},
-    package_data={"windbench.conf": ["*.yaml", "*/*.yaml", "*/*/*.yaml"]},
+    package_data={
+        "windbench.conf": ["*.yaml", "*/*.yaml", "*/*/*.yaml", "mesh/*.ply", "mesh/*.obj"]
+    },
 )

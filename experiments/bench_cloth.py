@@ -9,7 +9,10 @@ and the best of the loop's own ``step_seconds`` phases (wind, aero, cloth, total
 
     PYTHONPATH=$PWD python experiments/bench_cloth.py [--frames 120] [--substeps 16] [key=value ...]
 
-writes ``experiments/results/bench_cloth.csv`` (one row per case). With ``--stretch`` it
+writes ``experiments/results/bench_cloth.csv`` (one row per case); ``--shirt`` times the
+``shirt`` scene instead (the one-piece garment on the mesh character, ``global`` and
+``particles`` wind) into ``bench_shirt.csv``, with the cost of one body distance query.
+With ``--stretch`` it
 records instead how far the stiff membrane stretches at the three sizes (target: under 5%):
 the flag hanging from its pole in still air (``scene.sources=[]``; the largest warp/weft
 edge strain at the end of 4 s and its maximum over the last 2 s) and in its 6 m/s wind
@@ -51,6 +54,7 @@ CASES = (
 )
 OUT = Path(__file__).resolve().parent / "results" / "bench_cloth.csv"
 STRETCH_OUT = OUT.with_name("stretch_cloth.csv")
+SHIRT_OUT = OUT.with_name("bench_shirt.csv")
 STRETCH_FRAMES = 240  # 4 s
 
 
@@ -88,17 +92,14 @@ def stretch_case(resolution, still: bool, extra: list[str]) -> dict:
 
 def bench_case(resolution, frames: int, warmup: int, extra: list[str]) -> dict:
     nu, nv = resolution
+    scene = ["scene=flag", "wind=global", f"scene.cloths.0.resolution=[{nu},{nv}]"]
+    return timed_frames([*scene, *extra], frames, warmup)
+
+
+def timed_frames(overrides: list[str], frames: int, warmup: int) -> dict:
+    """Median and best frame times of a run of ``overrides`` after ``warmup`` frames."""
     duration = (frames + warmup) / 60.0
-    cfg = compose_config(
-        [
-            "scene=flag",
-            "wind=global",
-            f"scene.cloths.0.resolution=[{nu},{nv}]",
-            f"sim.duration={duration}",
-            "sim.progress=false",
-            *extra,
-        ]
-    )
+    cfg = compose_config([*overrides, f"sim.duration={duration}", "sim.progress=false"])
     sim = Simulation(prepare(cfg))
     for n in range(warmup):
         sim.step(n)
@@ -122,7 +123,7 @@ def bench_case(resolution, frames: int, warmup: int, extra: list[str]) -> dict:
     med = np.median(sec, axis=0)
     stats = sim.cloth_solver.stats(sim.state)
     return {
-        "vertices": nu * nv,
+        "vertices": sim.state.positions.shape[0],
         "substeps": int(cfg.cloth.substeps),
         "frames": frames,
         "ms_wind": 1e3 * med[0],
@@ -147,39 +148,86 @@ def main() -> None:
     parser.add_argument("--substeps", type=int, default=None)
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--stretch", action="store_true", help="record stretch, not speed")
+    parser.add_argument("--shirt", action="store_true", help="the shirt scene (bench_shirt.csv)")
     parser.add_argument("overrides", nargs="*", help="further config overrides, key=value")
     args = parser.parse_args()
     extra = [] if args.substeps is None else [f"cloth.substeps={args.substeps}"]
     extra += args.overrides
     if args.stretch:
         return write_stretch(extra, args.out if args.out != OUT else STRETCH_OUT)
+    if args.shirt:
+        return write_rows(shirt_rows(args.frames, args.warmup, extra), args.out, SHIRT_OUT)
     rows = []
     for name, res, target in CASES:
         row = {"case": name, "nu": res[0], "nv": res[1], "target_fps": target}
         row.update(bench_case(res, args.frames, args.warmup, extra))
         row["meets_target_wall"] = bool(row["fps_median"] >= target)
         row["meets_target_cpu"] = bool(row["fps_cpu"] >= target)
-        row["numba_threads"] = os.environ["NUMBA_NUM_THREADS"]
-        row["load_average_1min"] = os.getloadavg()[0]
-        row["cpus"] = os.cpu_count()
-        row["machine"] = platform.processor() or platform.machine()
-        row["date"] = datetime.now(UTC).isoformat(timespec="seconds")
-        rows.append(row)
+        rows.append(machine(row))
         print(
             f"{name:12s} {row['fps_median']:7.1f} frames/s wall, {row['fps_cpu']:7.1f} by CPU "
             f"time (target {target:g}); "
             f"cloth {row['ms_cloth']:.2f} ms, aero {row['ms_aero']:.2f} ms, "
             f"wind {row['ms_wind']:.2f} ms; max stretch {row['max_stretch']:.3f}"
         )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    with open(args.out, "w", newline="") as fh:
+    write_rows(rows, args.out, OUT)
+
+
+def machine(row: dict) -> dict:
+    """What a timing was measured under (the machine is shared)."""
+    row["numba_threads"] = os.environ["NUMBA_NUM_THREADS"]
+    row["load_average_1min"] = os.getloadavg()[0]
+    row["cpus"] = os.cpu_count()
+    row["machine"] = platform.processor() or platform.machine()
+    row["date"] = datetime.now(UTC).isoformat(timespec="seconds")
+    return row
+
+
+def shirt_rows(frames: int, warmup: int, extra: list[str]) -> list[dict]:
+    """The shirt of Fig. 6 (one-piece garment, about a 64 x 64 cloth, on the mesh character)
+    in the global and the particle wind, with the cost of one signed-distance query."""
+    rows = []
+    for wind in ("global", "particles"):
+        row = {"case": f"shirt_{wind}", "target_fps": 60.0}
+        row.update(timed_frames(["scene=shirt", f"wind={wind}", *extra], frames, warmup))
+        row["ns_per_body_query"] = body_query_ns(["scene=shirt", *extra])
+        rows.append(machine(row))
+        print(
+            f"{row['case']:16s} {row['fps_median']:7.1f} frames/s wall, {row['fps_cpu']:7.1f} "
+            f"by CPU time; cloth {row['ms_cloth']:.1f} ms; body query "
+            f"{row['ns_per_body_query']:.0f} ns; max penetration {row['max_penetration']:.3g} m"
+        )
+    return rows
+
+
+def body_query_ns(overrides: list[str], repeats: int = 20) -> float:
+    """Nanoseconds per signed distance (and normal) of a cloth vertex to the scene's bodies:
+    the query each contact makes, timed over the cloth's rest vertices."""
+    from windbench.geometry.bodies import body_table, union_distance
+    from windbench.scenes import build_scene
+
+    scene = build_scene(compose_config(overrides).scene)
+    points = np.concatenate([c.vertices for c in scene.cloths])
+    table = body_table(scene.bodies)
+    dist, normal = np.empty(len(points)), np.empty_like(points)
+    union_distance(table, points, dist, normal)  # compiled
+    c0 = time.process_time()
+    for _ in range(repeats):
+        union_distance(table, points, dist, normal)
+    return 1e9 * (time.process_time() - c0) / (repeats * len(points))
+
+
+def write_rows(rows: list[dict], out: Path, default: Path) -> None:
+    out = out if out != OUT else default
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out, "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
         for row in rows:
             writer.writerow(
                 {k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()}
             )
-    print(f"wrote {args.out}")
+    print(f"wrote {out}")
 
 
 def write_stretch(extra: list[str], out: Path) -> None:

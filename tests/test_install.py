@@ -48,6 +48,8 @@ def test_a_built_wheel_runs_from_a_fresh_venv(tmp_path):
     ).stdout.strip()
     assert where.startswith(str(venv)) and where.endswith("windbench/conf")
     assert (Path(where) / "scene" / "flag.yaml").is_file()
+    assert (Path(where) / "mesh" / "character.ply").is_file()  # the shirt scene's meshes
+    assert (Path(where) / "mesh" / "shirt.obj").is_file()
 
     helped = _run([venv / "bin" / "windbench", "--help"], cwd=work, env=env).stdout
     assert "scene       empty, fence, flag*" in helped and f"Config files: {where}" in helped

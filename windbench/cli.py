@@ -20,22 +20,10 @@ from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from windbench import sweep
-from windbench.config import register_configs
+from windbench.config import config_dir, register_configs
 from windbench.errors import ConfigError, FolderBusy
 from windbench.sweep import FolderLock, resume_decision, write_status
 from windbench.wind.registry import backends, discover
-
-PACKAGE = Path(__file__).resolve().parent
-
-
-def config_dir() -> Path:
-    """``conf/`` of a source checkout (where a user edits), else the configs shipped in the
-    installed package (``windbench/conf``, mapped from ``conf/`` when the wheel is built)."""
-    checkout = PACKAGE.parent
-    if (checkout / "pyproject.toml").is_file() and (checkout / "conf" / "config.yaml").is_file():
-        return checkout / "conf"
-    return PACKAGE / "conf"
-
 
 CONFIG_DIR = str(config_dir())
 log = logging.getLogger("windbench")

@@ -15,12 +15,23 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, ListConfig, OmegaConf
 
 from windbench.errors import ConfigError
+
+
+def config_dir() -> Path:
+    """``conf/`` of a source checkout (where a user edits), else the configs shipped in the
+    installed package (``windbench/conf``, mapped from ``conf/`` when the wheel is built)."""
+    package = Path(__file__).resolve().parent
+    checkout = package.parent
+    if (checkout / "pyproject.toml").is_file() and (checkout / "conf" / "config.yaml").is_file():
+        return checkout / "conf"
+    return package / "conf"
 
 
 def setting(

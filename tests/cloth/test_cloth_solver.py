@@ -162,8 +162,8 @@ def test_bounding_box_broad_phase_changes_no_bit():
     rng = np.random.default_rng(1)
     pts = np.concatenate([a.positions, rng.uniform(-0.4, 0.4, (200, 3))])
     depth = np.maximum(0.0, -distances(bodies, pts)[0]).max()
-    kinds, params, boxes, _, _ = culled.tables.contacts
-    assert depth > 0.01 and max_penetration(kinds, params, boxes, pts) == depth
+    bodies, boxes, _, _ = culled.tables.contacts
+    assert depth > 0.01 and max_penetration(bodies, boxes, pts) == depth
     e = culled.topology.edges[culled.stretch_edges]
     stretch = np.linalg.norm(pts[e[:, 0]] - pts[e[:, 1]], axis=1)
     stretch = stretch / culled.topology.edge_length[culled.stretch_edges] - 1.0

@@ -1,8 +1,8 @@
 """Cloth against rigid bodies: vertex projection with friction, and the penetration figure.
 
 The paper's cloth system detects cloth/body contacts with k-DOP hierarchies [MKE03]; here
-the bodies are few analytic shapes, so each cloth vertex asks the signed distance to their
-union (:func:`windbench.geometry.bodies.union_distance_point`, reused, not rewritten) and a
+the bodies are few analytic shapes or tabulated meshes, so each cloth vertex asks the signed
+distance to their union (:func:`windbench.geometry.bodies.union_distance_point`) and a
 vertex closer than the collision margin is moved out along the body's outward normal
 (position-based contact, Mueller et al. 2007). A vertex outside every body's bounding box
 grown by the margin is skipped (:func:`near_a_body`): it lies farther than the margin from
@@ -49,12 +49,12 @@ def near_a_body(boxes, px, py, pz):
 
 
 @njit(cache=True, inline="always")
-def project_vertex(kinds, params, margin, friction, x_prev, p, normal):
+def project_vertex(bodies, margin, friction, x_prev, p, normal):
     """Move ``p`` (in place) out to ``margin`` from the bodies; friction against ``x_prev``.
 
     d = sdf(p) - margin < 0  ->  p += -d n;  tangential move dt limited by mu |d|.
     """
-    d = union_distance_point(kinds, params, p[0], p[1], p[2], normal) - margin
+    d = union_distance_point(bodies, p[0], p[1], p[2], normal) - margin
     if d >= 0.0:
         return
     for k in range(3):
@@ -80,7 +80,7 @@ def project_vertex(kinds, params, margin, friction, x_prev, p, normal):
 
 
 @njit(cache=True)
-def deepest_penetration(kinds, params, boxes, positions):
+def deepest_penetration(bodies, boxes, positions):
     """max_i max(0, -sdf(x_i)): how deep the deepest vertex lies inside the union of the bodies.
 
     Only vertices inside a body's bounding box (``boxes``, :func:`body_boxes`) can be inside it.
@@ -90,13 +90,14 @@ def deepest_penetration(kinds, params, boxes, positions):
     for i in range(positions.shape[0]):
         px, py, pz = positions[i, 0], positions[i, 1], positions[i, 2]
         if near_a_body(boxes, px, py, pz):
-            deepest = max(deepest, -union_distance_point(kinds, params, px, py, pz, normal))
+            deepest = max(deepest, -union_distance_point(bodies, px, py, pz, normal))
     return deepest
 
 
-def max_penetration(kinds, params, boxes, positions) -> float:
-    """Largest depth (m) of any vertex inside any body; 0 with no bodies or no vertices."""
-    if kinds.shape[0] == 0 or positions.shape[0] == 0:
+def max_penetration(bodies, boxes, positions) -> float:
+    """Largest depth (m) of any vertex inside any body of the table ``bodies``
+    (:class:`~windbench.geometry.bodies.BodyTable`); 0 with no bodies or no vertices."""
+    if bodies.kinds.shape[0] == 0 or positions.shape[0] == 0:
         return 0.0
     x = np.ascontiguousarray(positions, dtype=np.float64)
-    return float(deepest_penetration(kinds, params, boxes, x))
+    return float(deepest_penetration(bodies, boxes, x))

@@ -1,7 +1,10 @@
-"""Cloth meshes: the rectangular flag of the paper's Figs. 3-5 and the shirt of Fig. 6.
+"""Cloth meshes: the rectangular flag of the paper's Figs. 3-5, a tube shirt, and any
+garment read from a mesh file (``type: mesh``: the one-piece shirt of Fig. 6).
 
 A mesh is the model part of a cloth (rest geometry, triangles, pinned vertices); the
-solver's state (positions, velocities) lives elsewhere.
+solver's state (positions, velocities) lives elsewhere. The rest shape is the shape the
+cloth is built in: a garment file gives it as worn (its edge lengths and fold angles are
+those the cloth keeps).
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from windbench.errors import ConfigError
+from windbench.geometry.triangle_mesh import boundary_loops, check_manifold, read_mesh
 
 
 @dataclass(frozen=True)
@@ -219,7 +223,50 @@ def shirt_mesh(spec: Mapping, key: str) -> ClothMesh:
     )
 
 
-MESH_BUILDERS = {"flag": flag_mesh, "shirt": shirt_mesh}
+FILE_KEYS = {"name", "type", "file", "scale", "offset", "pin", "material"}
+FILE_PINS = ("none", "top_loop")
+
+
+def file_mesh(spec: Mapping, key: str) -> ClothMesh:
+    """A cloth read from an OBJ, PLY or STL ``file`` (placed by ``scale`` and ``offset``,
+    :mod:`windbench.geometry.triangle_mesh`), e.g. the one-piece shirt of
+    ``conf/mesh/shirt.obj``. It must be manifold (at most two triangles on an edge); its
+    boundary loops are its openings. ``pin``: ``none`` (the default: the cloth rests on the
+    bodies), ``top_loop`` (the boundary loop of highest mean height, a shirt's collar) or a
+    list of vertex ids (the file's order, coincident vertices merged).
+    """
+    unknown = set(spec) - FILE_KEYS
+    if unknown:
+        raise ConfigError(key, f"unknown key(s) {sorted(unknown)}; allowed {sorted(FILE_KEYS)}")
+    vertices, triangles = read_mesh(spec, key)
+    check_manifold(triangles, f"{key}.file")
+    unused = vertices.shape[0] - np.unique(triangles).size
+    if unused:
+        raise ConfigError(f"{key}.file", f"{unused} vertex(es) belong to no triangle: no mass")
+    pin = spec.get("pin", "none")
+    if isinstance(pin, str):
+        if pin not in FILE_PINS:
+            raise ConfigError(
+                f"{key}.pin", f"must be one of {list(FILE_PINS)} or a list of ids, got {pin!r}"
+            )
+        loops = boundary_loops(triangles) if pin == "top_loop" else []
+        if pin == "top_loop" and not loops:
+            raise ConfigError(f"{key}.pin", "top_loop needs a mesh with a boundary")
+        pinned = max(loops, key=lambda ids: vertices[ids, 2].mean()) if loops else []
+    else:
+        pinned = np.asarray(list(pin), dtype=np.int64)
+        if pinned.size and (pinned.min() < 0 or pinned.max() >= len(vertices)):
+            raise ConfigError(f"{key}.pin", f"vertex ids must lie in [0, {len(vertices) - 1}]")
+    return ClothMesh(
+        name=str(spec.get("name", "cloth")),
+        vertices=vertices,
+        triangles=triangles,
+        pinned=np.sort(np.asarray(pinned, dtype=np.int64)),
+        material=dict(spec.get("material", {}) or {}),
+    )
+
+
+MESH_BUILDERS = {"flag": flag_mesh, "shirt": shirt_mesh, "mesh": file_mesh}
 
 
 def mesh_from_config(spec: Mapping, key: str) -> ClothMesh:

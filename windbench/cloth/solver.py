@@ -61,7 +61,7 @@ from windbench.cloth.constraints import (
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
-from windbench.geometry.bodies import body_table
+from windbench.geometry.bodies import BodyTable, body_table
 
 BEND_EVERY = 2  # soft hinges are projected every BEND_EVERY-th substep ...
 BEND_RESOLVED = 0.04  # ... when (omega BEND_EVERY h)^2 <= this for every hinge
@@ -93,8 +93,7 @@ class Constraints(NamedTuple):
 class Contacts(NamedTuple):
     """The rigid bodies as the contact kernels read them."""
 
-    kinds: np.ndarray
-    params: np.ndarray
+    bodies: BodyTable
     boxes: np.ndarray  # (m, 6) bounding boxes grown by the margin
     margin: float  # m
     friction: float  # Coulomb coefficient
@@ -156,10 +155,10 @@ def _contacts(contacts, inv_mass, p, xp, normal):
     """Step 3: every free vertex inside a body's grown bounding box moved out to the margin
     (:func:`~windbench.cloth.collision.project_vertex`, friction against its motion from
     xp; ``normal`` (3,) work space)."""
-    kinds, params, boxes, margin, friction = contacts
+    bodies, boxes, margin, friction = contacts
     for i in range(p.shape[0]):
         if inv_mass[i] > 0.0 and near_a_body(boxes, p[i, 0], p[i, 1], p[i, 2]):
-            project_vertex(kinds, params, margin, friction, xp[i], p[i], normal)
+            project_vertex(bodies, margin, friction, xp[i], p[i], normal)
 
 
 @njit(cache=True)
@@ -168,7 +167,7 @@ def _strain_limit(model, frame, p, xp, lam, chain_work, normal):
     thread keeps the limit (at most ``limit_passes``)."""
     c, s = model.constraints, model.settings
     alpha, scale = frame.edge_alpha, frame.edge_scale
-    has_bodies = model.contacts.kinds.shape[0] > 0
+    has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     for _ in range(s.limit_passes if s.strain_limit > 0.0 else 0):
         ptr, vert, rest, limit = c.chain_ptr, c.chain_vert, c.edge_rest, s.strain_limit
         solved = solve_chains(p, c.inv_mass, ptr, vert, rest, alpha, scale, lam, chain_work, limit)
@@ -209,7 +208,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     xp[:] = x
     vv[:] = v
     normal = np.empty(3)
-    has_bodies = model.contacts.kinds.shape[0] > 0
+    has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     for sub in range(s.substeps):
         _predict(c, f_ext, h, xp, p, vv)  # 1.
         lam[:] = 0.0  # XPBD multipliers of the substep
@@ -469,10 +468,11 @@ class XPBDCloth:
         self.stiffness = k = stiffness(model, self.topology, self.materials)  # mesh order
         self.stretch_edges = ~self.topology.edge_shear
         s = self.settings
-        kinds, params_ = body_table(tuple(bodies))
         self.tables = XPBDModel(
             constraint_tables(model, self.topology, k, s),
-            Contacts(kinds, params_, body_boxes(tuple(bodies), s.margin), s.margin, s.friction),
+            Contacts(
+                body_table(tuple(bodies)), body_boxes(tuple(bodies), s.margin), s.margin, s.friction
+            ),
             Settings(s.substeps, s.edge_iterations, s.strain_limit, s.limit_passes),
         )
         c = self.tables.constraints
@@ -527,9 +527,9 @@ class XPBDCloth:
     def stats(self, state: ClothState) -> dict[str, float]:
         """Figures recorded per step: kinetic energy (J), deepest body penetration (m),
         largest stretch of a warp/weft edge (relative)."""
-        kinds, params, boxes, _, _ = self.tables.contacts
+        bodies, boxes, _, _ = self.tables.contacts
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
-            "max_penetration": max_penetration(kinds, params, boxes, state.positions),
+            "max_penetration": max_penetration(bodies, boxes, state.positions),
             "max_stretch": self.max_stretch(state.positions),
         }

@@ -1,1 +1,2 @@
-"""Rigid bodies, triangle rasterisation into grid cells, segment/triangle intersection."""
+"""Rigid bodies (analytic shapes and triangle meshes), their signed distances, mesh files,
+the Fig. 6 character, triangle rasterisation into grid cells, segment/triangle intersection."""

@@ -1,19 +1,25 @@
-"""Rigid obstacles: box, capsule, cylinder and plane, as signed distance functions.
+"""Rigid obstacles: box, capsule, cylinder, plane and triangle mesh, as signed distances.
 
 The paper treats walls and the character's body as rigid objects that shape the wind but
 feel no force (§4.1.2); cloth collides with them ([MKE03]) and wind particles stop at them
-(§4.2.2). Every body here is one row of a parameter table (``kind`` + 7 floats) read by the
-numba kernel :func:`body_distance`, which returns the signed distance (negative inside)
-and the outward unit normal at the nearest surface point.
+(§4.2.2). Every body is one row of a parameter table (``kind`` + 7 floats, :class:`BodyTable`)
+read by the numba kernel :func:`table_distance`, which returns the signed distance (negative
+inside) and the outward unit normal at the nearest surface point.
 
-======== ==================================== ==============================================
-body     config keys                          solid region
-======== ==================================== ==============================================
-box      ``min``, ``max``                     the axis-aligned box
-capsule  ``a``, ``b``, ``radius``             points within ``radius`` of the segment a-b
-cylinder ``a``, ``b``, ``radius``             the finite, flat-capped cylinder on a-b
-plane    ``point``, ``normal``                the half-space behind the plane, (x-p).n < 0
-======== ==================================== ==============================================
+======== ====================================== ============================================
+body     config keys                            solid region
+======== ====================================== ============================================
+box      ``min``, ``max``                       the axis-aligned box
+capsule  ``a``, ``b``, ``radius``               points within ``radius`` of the segment a-b
+cylinder ``a``, ``b``, ``radius``               the finite, flat-capped cylinder on a-b
+plane    ``point``, ``normal``                  the half-space behind the plane, (x-p).n < 0
+mesh     ``file``, ``scale``, ``offset``,       inside a closed triangle mesh (OBJ, PLY, STL;
+         ``spacing``                            :mod:`windbench.geometry.triangle_mesh`)
+======== ====================================== ============================================
+
+A mesh body's distance is tabulated once, on a lattice of ``spacing`` metres (default
+MESH_SPACING), and sampled trilinearly (:mod:`windbench.geometry.sdf`); its row holds the
+lattice's place in the table's ``fields`` and the mesh's bounding box.
 
 Every body may set ``name`` and ``resolve`` (default true). ``resolve: false`` marks a
 body thinner than any sensible wind cell (a flag pole): cloth collides with it, but the
@@ -23,22 +29,43 @@ run does not demand that the wind grid hold a cell inside it.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from windbench.errors import ConfigError
+from windbench.geometry.sdf import SDFLattice, lattice_distance, sdf_lattice
+from windbench.geometry.triangle_mesh import (
+    Placement,
+    check_closed,
+    find_file,
+    read_mesh,
+    signed_volume,
+)
 
-BOX, CAPSULE, CYLINDER, PLANE = 0, 1, 2, 3
-KINDS = {"box": BOX, "capsule": CAPSULE, "cylinder": CYLINDER, "plane": PLANE}
+BOX, CAPSULE, CYLINDER, PLANE, MESH = 0, 1, 2, 3, 4
+KINDS = {"box": BOX, "capsule": CAPSULE, "cylinder": CYLINDER, "plane": PLANE, "mesh": MESH}
 N_PARAMS = 7
+MESH_SPACING = 0.01  # m: the SDF lattice of a mesh body; error ~ h^2 / (4 r) on radius r
 _KEYS = {
     "box": ("min", "max"),
     "capsule": ("a", "b", "radius"),
     "cylinder": ("a", "b", "radius"),
     "plane": ("point", "normal"),
+    "mesh": ("file", "scale", "offset", "spacing"),
 }
+
+
+class BodyTable(NamedTuple):
+    """The bodies as the kernels read them: ``kinds`` (m,), ``params`` (m, 7) and
+    ``fields``, the mesh bodies' distance lattices one after another (:meth:`SDFLattice.entry`)."""
+
+    kinds: np.ndarray
+    params: np.ndarray
+    fields: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -49,6 +76,7 @@ class Body:
     params: tuple[float, ...]
     name: str = ""
     resolve: bool = True  # False: thinner than the wind grid (a pole); cloth still collides
+    lattice: SDFLattice | None = field(default=None, compare=False, repr=False)  # mesh only
 
     @property
     def kind_id(self) -> int:
@@ -59,6 +87,8 @@ class Body:
         p = np.asarray(self.params)
         if self.kind == "box":
             return p[0:3], p[3:6]
+        if self.kind == "mesh":
+            return p[1:4], p[4:7]
         if self.kind == "plane":
             return np.full(3, -np.inf), np.full(3, np.inf)
         r = p[6]
@@ -79,6 +109,8 @@ def body_from_config(spec: Mapping, key: str) -> Body:
         raise ConfigError(
             key, f"unknown key(s) {sorted(unknown)} for a {kind}; allowed {sorted(allowed)}"
         )
+    if kind == "mesh":
+        return mesh_body(spec, key)
     row = np.zeros(N_PARAMS)
     for n, name in enumerate(k for k in _KEYS[kind] if k != "radius"):
         if name not in spec:
@@ -107,11 +139,47 @@ def body_from_config(spec: Mapping, key: str) -> Body:
     )
 
 
-def body_table(bodies: Sequence[Body]) -> tuple[np.ndarray, np.ndarray]:
-    """(kinds ``(m,)`` int64, params ``(m, 7)`` float64) for the numba kernels."""
+def mesh_body(spec: Mapping, key: str) -> Body:
+    """A body of ``type: mesh``: a closed mesh file, its distance tabulated (module docstring)."""
+    spacing = spec.get("spacing", MESH_SPACING)
+    if not isinstance(spacing, int | float) or not np.isfinite(spacing) or spacing <= 0:
+        raise ConfigError(f"{key}.spacing", f"must be a length > 0 (m), got {spacing!r}")
+    path = find_file(spec.get("file"), f"{key}.file")
+    placement = Placement.from_config(spec, key)
+    stamp = path.stat()
+    vertices, triangles, lattice = _tabulated(
+        str(path), stamp.st_mtime_ns, stamp.st_size, placement, float(spacing), key
+    )
+    row = (0.0, *vertices.min(axis=0), *vertices.max(axis=0))  # lattice offset: body_table
+    name = str(spec.get("name", Body.name))
+    return Body(
+        "mesh", tuple(float(v) for v in row), name, bool(spec.get("resolve", Body.resolve)), lattice
+    )
+
+
+@lru_cache(maxsize=8)
+def _tabulated(path: str, mtime: int, size: int, placement: Placement, spacing: float, key: str):
+    """Read, check and tabulate a body mesh once per file version, placement and spacing."""
+    spec = {"file": path, "scale": placement.scale, "offset": list(placement.offset)}
+    vertices, triangles = read_mesh(spec, key)
+    check_closed(triangles, f"{key}.file")
+    if signed_volume(vertices, triangles) < 0:  # wound inside out: turn it the right way
+        triangles = triangles[:, ::-1].copy()
+    return vertices, triangles, sdf_lattice(vertices, triangles, spacing)
+
+
+def body_table(bodies: Sequence[Body]) -> BodyTable:
+    """The :class:`BodyTable` of ``bodies`` for the numba kernels."""
     kinds = np.array([b.kind_id for b in bodies], dtype=np.int64)
     params = np.array([b.params for b in bodies], dtype=np.float64).reshape(len(bodies), N_PARAMS)
-    return kinds, params
+    entries, offset = [], 0
+    for b, body in enumerate(bodies):
+        if body.lattice is not None:
+            params[b, 0] = offset
+            entries.append(body.lattice.entry())
+            offset += entries[-1].size
+    fields = np.concatenate(entries) if entries else np.zeros(0)
+    return BodyTable(kinds, params, fields)
 
 
 def distances(bodies: Sequence[Body], points) -> tuple[np.ndarray, np.ndarray]:
@@ -119,8 +187,7 @@ def distances(bodies: Sequence[Body], points) -> tuple[np.ndarray, np.ndarray]:
     pts = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=np.float64)))
     dist = np.empty(pts.shape[0])
     normal = np.empty_like(pts)
-    kinds, params = body_table(bodies)
-    union_distance(kinds, params, pts, dist, normal)
+    union_distance(body_table(bodies), pts, dist, normal)
     return dist, normal
 
 
@@ -144,7 +211,8 @@ def _segment_closest(px, py, pz, prm):
 
 @njit(cache=True)
 def body_distance(kind, prm, px, py, pz, normal):
-    """Signed distance from p to one body (negative inside); outward unit normal in ``normal``."""
+    """Signed distance from p to one analytic (convex) body, negative inside; outward unit
+    normal in ``normal`` (mesh bodies: :func:`table_distance`)."""
     if kind == PLANE:
         normal[0], normal[1], normal[2] = prm[3], prm[4], prm[5]
         return (px - prm[0]) * prm[3] + (py - prm[1]) * prm[4] + (pz - prm[2]) * prm[5]
@@ -215,13 +283,25 @@ def body_distance(kind, prm, px, py, pz, normal):
 
 
 @njit(cache=True)
-def union_distance_point(kinds, params, px, py, pz, normal):
-    """Signed distance to the nearest of several bodies, normal of that one."""
+def table_distance(table, b, px, py, pz, normal):
+    """Signed distance from p to body b of a :class:`BodyTable`, outward normal in ``normal``:
+    the mesh bodies' lattices (:func:`~windbench.geometry.sdf.lattice_distance`), else
+    :func:`body_distance`."""
+    if table.kinds[b] == MESH:
+        return lattice_distance(table.fields, table.params[b], px, py, pz, normal)
+    return body_distance(table.kinds[b], table.params[b], px, py, pz, normal)
+
+
+@njit(cache=True)
+def union_distance_point(table, px, py, pz, normal):
+    """Signed distance to the nearest body of a :class:`BodyTable`, normal of that one."""
+    normal[0], normal[1], normal[2] = 0.0, 0.0, 1.0
+    if table.kinds.shape[0] == 1:  # one body: no scratch to allocate (a contact's hot path)
+        return table_distance(table, 0, px, py, pz, normal)
     best = np.inf
     tmp = np.empty(3)
-    normal[0], normal[1], normal[2] = 0.0, 0.0, 1.0
-    for b in range(kinds.shape[0]):
-        d = body_distance(kinds[b], params[b], px, py, pz, tmp)
+    for b in range(table.kinds.shape[0]):
+        d = table_distance(table, b, px, py, pz, tmp)
         if d < best:
             best = d
             normal[0], normal[1], normal[2] = tmp[0], tmp[1], tmp[2]
@@ -229,9 +309,7 @@ def union_distance_point(kinds, params, px, py, pz, normal):
 
 
 @njit(cache=True)
-def union_distance(kinds, params, points, dist, normal):
-    """dist[p], normal[p] = signed distance to the union of bodies at points[p]."""
+def union_distance(table, points, dist, normal):
+    """dist[p], normal[p] = signed distance to the union of a table's bodies at points[p]."""
     for p in range(points.shape[0]):
-        dist[p] = union_distance_point(
-            kinds, params, points[p, 0], points[p, 1], points[p, 2], normal[p]
-        )
+        dist[p] = union_distance_point(table, points[p, 0], points[p, 1], points[p, 2], normal[p])

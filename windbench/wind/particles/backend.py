@@ -131,14 +131,14 @@ def particle_model(scene, grid, params) -> ParticleModel:
     """Check the ``wind.*`` values and build the model of ``scene`` on ``grid``."""
     _check(params)
     source_kinds, source_params = parameter_table(scene.sources)
-    body_kinds, body_params = body_table(scene.bodies)
+    bodies = body_table(scene.bodies)
     cells = CellGrid(
         tuple(float(x) for x in grid.lower),
         tuple(float(x) for x in grid.upper),
         float(grid.h),
         tuple(int(n) for n in grid.shape),
     )
-    start, items = register_bodies(body_kinds, body_params, cells)
+    start, items = register_bodies(bodies, cells)
     rules = TraceRules(
         max_age=float(params.max_age),
         memory=float(params.memory),
@@ -146,9 +146,7 @@ def particle_model(scene, grid, params) -> ParticleModel:
         max_hits=int(params.max_hits),
         mark_mode=MARK_MODES[params.deflected_cells],
     )
-    tables = GustModel(
-        cells, source_kinds, source_params, BodyCells(body_kinds, body_params, start, items), rules
-    )
+    tables = GustModel(cells, source_kinds, source_params, BodyCells(bodies, start, items), rules)
     return ParticleModel(
         tables=tables,
         emitters=emitters_from_scene(scene, grid, params, int(params.seed)),

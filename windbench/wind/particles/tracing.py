@@ -13,8 +13,9 @@ overlap it (:func:`register_cloth`), so the cost is O(particles x cells crossed)
 first hit the particle stops on the surface (``delta`` outside it) and its velocity loses
 the normal component, the paper's ``w_i <- w_i - (n_obj . w_i) n_obj``; it spends the
 rest of the step sliding along the object. A head-on hit (nothing left of w) ends the
-particle: its gust has stagnated at the wall. Rigid bodies are convex, so their signed
-distance is convex along a piece and :func:`convex_first_hit` finds its first root exactly.
+particle: its gust has stagnated at the wall. The analytic bodies are convex, so their signed
+distance is convex along a piece and :func:`convex_first_hit` finds its first root exactly;
+mesh bodies are sphere-traced (:func:`windbench.geometry.sdf.lattice_first_hit`).
 
 Cell state per (cell, source): ``marked[c, s]``, the time the source's particles last
 reached the cell (-inf: never), and ``values[c, s]``, the value that mark left. A free
@@ -44,8 +45,15 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from windbench.geometry.bodies import body_distance, union_distance_point
+from windbench.geometry.bodies import (
+    MESH,
+    BodyTable,
+    body_distance,
+    table_distance,
+    union_distance_point,
+)
 from windbench.geometry.raster import segment_triangle
+from windbench.geometry.sdf import lattice_first_hit
 from windbench.wind.primitives import primitive_velocity
 
 SOLID, BODIES, TRIANGLES = 1, 2, 4  # bits of the per-cell flags
@@ -70,8 +78,7 @@ class BodyCells(NamedTuple):
     """Rigid bodies (:func:`~windbench.geometry.bodies.body_table`) and, as CSR, the bodies
     registered in each cell: those of cell c are ``items[start[c]:start[c + 1]]``."""
 
-    kinds: np.ndarray
-    params: np.ndarray
+    table: BodyTable
     start: np.ndarray
     items: np.ndarray
 
@@ -154,7 +161,7 @@ class TraceStep(NamedTuple):
 
 
 @njit(cache=True)
-def register_bodies(kinds, params, grid):
+def register_bodies(table, grid):
     """CSR (start, items) of the bodies whose surface may reach into each cell.
 
     Body b is registered in cell c when d_b(centre_c) <= half the cell diagonal, i.e. the
@@ -177,8 +184,8 @@ def register_bodies(kinds, params, grid):
             px = grid.lower[0] + (i + 0.5) * grid.h
             py = grid.lower[1] + (j + 0.5) * grid.h
             pz = grid.lower[2] + (k + 0.5) * grid.h
-            for b in range(kinds.shape[0]):
-                if body_distance(kinds[b], params[b], px, py, pz, normal) <= reach:
+            for b in range(table.kinds.shape[0]):
+                if table_distance(table, b, px, py, pz, normal) <= reach:
                     if fill == 0:
                         start[c + 1] += 1
                     else:
@@ -282,6 +289,14 @@ def convex_first_hit(kind, prm, a, e, scratch, normal):
             lo = mid
     body_distance(kind, prm, ax + lo * ex, ay + lo * ey, az + lo * ez, normal)
     return lo
+
+
+@njit(cache=True, inline="always")
+def first_body_hit(table, b, a, e, scratch, normal):
+    """First s in [0, 1] where a + s e meets body b of the table, or -1; normal there."""
+    if table.kinds[b] == MESH:
+        return lattice_first_hit(table.fields, table.params[b], a, e, normal)
+    return convex_first_hit(table.kinds[b], table.params[b], a, e, scratch, normal)
 
 
 @njit(cache=True, inline="always")
@@ -506,7 +521,7 @@ def trace_gusts(model, cloth, cells, particles, step, work, touched):
     mark the cells their paths cross, slide them along what they hit, compact the survivors.
     Returns (touched, n_touched, crossings, n_alive) (module docstring)."""
     kinds, prims, rules, g = model.source_kinds, model.source_params, model.rules, model.grid
-    b_kinds, b_params, b_start, b_items = model.bodies
+    b_table, b_start, b_items = model.bodies
     flags, marked, values, u = cells
     positions, sources, ages = particles
     velocities, wc, hit_n, tmp_n, scratch, ab, normals = work
@@ -547,9 +562,7 @@ def trace_gusts(model, cloth, cells, particles, step, work, touched):
                     for m in range(b_start[cell], b_start[cell + 1]):
                         bi = b_items[m]
                         e_ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-                        sh = convex_first_hit(
-                            b_kinds[bi], b_params[bi], (a[0], a[1], a[2]), e_ab, scratch, tmp_n
-                        )
+                        sh = first_body_hit(b_table, bi, (a[0], a[1], a[2]), e_ab, scratch, tmp_n)
                         if 0.0 <= sh < best:
                             best = sh
                             body_hit = True
@@ -693,7 +706,7 @@ def admit_particles(candidates, model, room, n, particles, durations):
     """
     points, candidate_sources, candidate_durations = candidates
     lower, upper = model.grid.lower, model.grid.upper
-    kinds, params = model.bodies.kinds, model.bodies.params
+    bodies = model.bodies.table
     normal = np.empty(3)
     m = 0
     for c in range(points.shape[0]):
@@ -702,7 +715,7 @@ def admit_particles(candidates, model, room, n, particles, durations):
         x, y, z = points[c, 0], points[c, 1], points[c, 2]
         if not (lower[0] <= x < upper[0] and lower[1] <= y < upper[1] and lower[2] <= z < upper[2]):
             continue
-        if kinds.shape[0] and union_distance_point(kinds, params, x, y, z, normal) < 0.0:
+        if bodies.kinds.shape[0] and union_distance_point(bodies, x, y, z, normal) < 0.0:
             continue
         q = n + m
         particles.positions[q, 0], particles.positions[q, 1], particles.positions[q, 2] = x, y, z
