@@ -18,7 +18,7 @@ def test_the_flag_behind_the_wall_is_sheltered(run_config, backend):
         [
             "scene=two_flags_wall",
             f"wind={backend}",
-            "grid.resolution=16",
+            "grid.resolution=48",  # cells of 0.5 m
             "sim.duration=1.5",
             "scene.cloths.0.resolution=[12,8]",
             "scene.cloths.1.resolution=[12,8]",

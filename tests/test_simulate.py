@@ -25,7 +25,7 @@ EXPECTED = {
 
 @pytest.mark.parametrize("scene", SCENES)
 def test_each_scene_writes_a_readable_dataset(run_config, scene):
-    resolution = 48 if scene == "fence" else 16  # the fence is 1 m thick in 47 m
+    resolution = {"fence": 48, "two_flags_wall": 24}.get(scene, 16)  # walls 1 m thick
     result, ds = run_config(
         [
             f"scene={scene}",

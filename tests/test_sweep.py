@@ -185,7 +185,7 @@ def test_same_config_and_seed_reproduce_every_number(run_config, scene):
         args = [
             f"wind={backend}",
             f"scene={scene}",
-            "grid.resolution=16",
+            "grid.resolution=20",
             "sim.duration=0.1",
             "seed=3",
         ]

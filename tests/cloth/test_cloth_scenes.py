@@ -88,7 +88,7 @@ def test_two_flags_feel_the_same_force_without_lee(tmp_path):
     overrides = [
         "scene=two_flags_wall",
         "wind=global",
-        "grid.resolution=16",
+        "grid.resolution=20",
         "sim.duration=1.5",
         "scene.cloths.0.resolution=[12,8]",
         "scene.cloths.1.resolution=[12,8]",

@@ -32,7 +32,7 @@ from windbench.report.lee import assign_lee_errors, choose_references  # noqa: E
 from windbench.simulate import Simulation, run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-RESOLUTIONS = (16, 24)
+RESOLUTIONS = (20, 30)
 DTS = (0.05, 0.1)
 TINY = [
     "sim.duration=0.2",
@@ -143,7 +143,7 @@ def test_corrupted_and_failed_runs_are_listed_and_do_not_stop_the_report(
     failed = _run(
         inputs / "failed",
         "scene=two_flags_wall",
-        "grid.resolution=16",
+        "grid.resolution=20",
         "sim.dt=0.05",
         "sim.spinup=0",
     )
@@ -176,8 +176,8 @@ def test_reference_run_has_zero_lee_error_and_others_finite(sweep):
     refs = choose_references(records, read_runs(find_runs([sweep / "3"])))  # --reference DIR
     assign_lee_errors(records, refs)
     summary = summary_frame(records).set_index(["resolution", "dt"])
-    assert summary.loc[(24, 0.1), "lee_error"] == 0.0  # the reference against itself
-    assert bool(summary.loc[(24, 0.1), "is_reference"])
+    assert summary.loc[(30, 0.1), "lee_error"] == 0.0  # the reference against itself
+    assert bool(summary.loc[(30, 0.1), "is_reference"])
     assert summary["is_reference"].sum() == 1
     # the global field is sampled exactly at the probe points: same wind at every resolution
     np.testing.assert_allclose(summary["lee_error"], 0.0, atol=1e-12)
@@ -209,7 +209,7 @@ def test_hydra_multirun_smoke_then_report(tmp_path):
             "experiment=smoke",
             "sim.duration=0.1",
             "sim.dt=0.05",
-            "grid.resolution=2,16",  # 2 cells cannot hold the wall: refused, listed as invalid
+            "grid.resolution=2,20",  # 2 cells cannot hold the wall: refused, listed as invalid
             f"hydra.sweep.dir={sweep_dir}",
         ],
         cwd=tmp_path,
@@ -283,7 +283,7 @@ def test_navier_stokes_reference_and_particle_figures(sweep, tmp_path):
     rep = build_report([inputs], out=tmp_path / "rep", progress=False)
     summary = rep.summary
     ref = rep.references["two_flags_wall"]
-    assert ref.run.settings["wind"] == "navier_stokes" and ref.run.settings["resolution"] == 24
+    assert ref.run.settings["wind"] == "navier_stokes" and ref.run.settings["resolution"] == 30
     assert ref.run.settings["dt"] == 0.05  # finest grid, then the smallest time step
     tfw = summary[summary["scene"] == "two_flags_wall"]
     glob = tfw[tfw["wind"] == "global"]["lee_error"]

@@ -8,7 +8,7 @@ from windbench.cli import compose_config
 from windbench.simulate import run
 
 TINY = ["output.snapshots=2", "output.probe_points=3", "sim.progress=false"]
-WALL = ["scene=two_flags_wall", "grid.resolution=16", "sim.dt=0.05", "sim.duration=0.3"]
+WALL = ["scene=two_flags_wall", "grid.resolution=20", "sim.dt=0.05", "sim.duration=0.3"]
 FRAMES = "output.frames.interval=0.1"
 SHIRT = ["scene=shirt", "grid.resolution=24", "sim.duration=0.05", "output.frames.interval=0.01"]
 
