@@ -74,6 +74,7 @@ from windbench.wind.navier_stokes.projection import (
     max_abs,
     subtract_gradient,
 )
+from windbench.wind.navier_stokes.turbulence import MIXING_LENGTH_LIMIT
 from windbench.wind.primitives import parameter_table, profile_scale, superpose
 from windbench.wind.registry import WindConfig, register_backend
 
@@ -98,7 +99,7 @@ class NavierStokesConfig(WindConfig):
     body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
     turbulence: str = "mixing_length"  # none | smagorinsky | mixing_length (eddy viscosity)
     smagorinsky_constant: float = 0.17  # C_s of nu_t = (C_s h)^2 |S|
-    mixing_length_limit: float = 40.0  # m, lambda of Blackadar's 1/l = 1/(kappa z) + 1/lambda
+    mixing_length_limit: float = MIXING_LENGTH_LIMIT  # m, Blackadar's lambda
     seed: int = 0  # synthetic inflow turbulence (conf/wind/navier_stokes.yaml sets ${seed})
 
 
@@ -412,18 +413,14 @@ class NavierStokesWind(WindField):
             return None
         if self.turbulence == "smagorinsky":
             return np.zeros(self.grid.shape)
-        z = self.grid.axes()[2] - self.lower[2]
-        eps = 1e-3 * self.h
-        column = np.zeros((len(z), 3))
-        column[:, 2] = self.grid.axes()[2]
-        column[:, :2] = 0.5 * (self.lower[:2] + np.asarray(self.grid.upper)[:2])
-        up, down = column.copy(), column.copy()
-        up[:, 2] += eps
-        down[:, 2] -= eps
-        shear = np.linalg.norm(
-            superpose(self.scene.sources, up) - superpose(self.scene.sources, down), axis=1
-        ) / (2 * eps)
-        layers = turbulence.surface_layer_viscosity(z, shear, limit)
+        layers = turbulence.sources_viscosity(
+            self.scene.sources,
+            self.grid.axes()[2],
+            self.lower,
+            self.grid.upper,
+            limit,
+            1e-3 * self.h,
+        )
         if not np.any(layers > 0):
             return None
         return np.where(self.solid.astype(bool), 0.0, layers[None, None, :])
