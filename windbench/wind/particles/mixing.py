@@ -68,6 +68,7 @@ SQRT3 = np.sqrt(3.0)
 UNIT_21 = 1.0 / (1 << 21)  # three uniforms of 21 bits from one 64-bit hash
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 EDGE_SLACK = 1e-9  # m: a box edge this close to a domain face stands on it (closed)
+BUFFER_CELLS = 2  # cells beyond an open face where particles fly on and may come back
 THINNING_STREAM = 1 << 62  # random streams of the emission's flux weighting (walks: steps)
 
 
@@ -272,13 +273,15 @@ def _tangential(x, n):
 
 @njit(cache=True, inline="always")
 def _bounce(a, r, n, escape):
-    """(a, r) after a hit on a surface of unit normal n (into the air): the carried wind a
-    turned along the surface with its speed kept, |a| t_hat, t_hat the direction of its
-    tangential part or, head-on, ``escape`` (a box face's nearest open edge) or r's
-    tangential part (none of them: a stops); the random part r mirrored if it points in."""
+    """(a, r) after a hit on a surface of unit normal n (into the air): the carried wind a,
+    if it points into the surface, turned along it with its speed kept, |a| t_hat, t_hat
+    the direction of its tangential part or, head-on, ``escape`` (a box face's nearest
+    open edge) or r's tangential part (none: a stops); r mirrored if it points in."""
     rn = r[0] * n[0] + r[1] * n[1] + r[2] * n[2]
     if rn < 0.0:
         r = (r[0] - 2.0 * rn * n[0], r[1] - 2.0 * rn * n[1], r[2] - 2.0 * rn * n[2])
+    if a[0] * n[0] + a[1] * n[1] + a[2] * n[2] >= 0.0:  # a leaves the surface: as it is
+        return a, r
     aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
     t, tt = _tangential(a, n)
     if tt <= 1e-18 * aa:
@@ -342,18 +345,24 @@ def nearest_hit(bodies, cloth, obstacles, cell, p, e, t0, t1, work):
 @njit(cache=True, inline="always")
 def _at_face(end, ijk, actions, s, a, r, g):
     """A path that left the grid at ``end``: (p, a, r, alive). The face's action for
-    source s: LEAVE ends the particle, MIRROR puts it back just inside and bounces it
-    (:func:`_bounce`, the face's normal into the domain), WRAP moves it to the opposite
-    face."""
+    source s: LEAVE puts it just outside (:func:`_beyond` flies it on), MIRROR puts it back
+    just inside and bounces it (:func:`_bounce`, the face's normal into the domain), WRAP
+    moves it to the opposite face."""
     axis, side = 0, 0
     for ax in range(3):
         if ijk[ax] < 0 or ijk[ax] >= g.shape[ax]:
             axis, side = ax, int(ijk[ax] >= 0)
     action = actions[s, axis, side]
-    if action == LEAVE:
-        return end, a, r, False
     inset = 1e-9 * g.h
     lo, hi = g.lower[axis] + inset, g.upper[axis] - inset
+    if action == LEAVE:  # just outside: the particle flies on in the buffer beyond
+        at = lo - 2.0 * inset if side == 0 else hi + 2.0 * inset
+        return (
+            (at if axis == 0 else end[0], at if axis == 1 else end[1], at if axis == 2 else end[2]),
+            a,
+            r,
+            True,
+        )
     at = (lo if side == 0 else hi) if action == MIRROR else (hi if side == 0 else lo)
     p = (at if axis == 0 else end[0], at if axis == 1 else end[1], at if axis == 2 else end[2])
     if action == MIRROR:
@@ -361,6 +370,51 @@ def _at_face(end, ijk, actions, s, a, r, g):
         n = (sign if axis == 0 else 0.0, sign if axis == 1 else 0.0, sign if axis == 2 else 0.0)
         a, r = _bounce(a, r, n, (0.0, 0.0, 0.0))
     return p, a, r, True
+
+
+@njit(cache=True, inline="always")
+def _buffered(p, actions, s, g):
+    """Whether p lies in the grid or in the buffer beyond its LEAVE faces (BUFFER_CELLS
+    wide, across those faces only)."""
+    reach = BUFFER_CELLS * g.h
+    for ax in range(3):
+        if p[ax] < g.lower[ax] and (actions[s, ax, 0] != LEAVE or p[ax] < g.lower[ax] - reach):
+            return False
+        if p[ax] >= g.upper[ax] and (actions[s, ax, 1] != LEAVE or p[ax] > g.upper[ax] + reach):
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _beyond(p, e, actions, s, g):
+    """A particle at p outside the grid with the path p -> p + e: (p, path fraction at which
+    it comes back in or -1, alive). Beyond an outflow the air goes on as inside (no bodies
+    there), so particles fly on in a buffer and may diffuse back: the outflow face does not
+    absorb them, which would starve its last cells of air within a length K / U of it."""
+    if not _buffered(p, actions, s, g):
+        return p, -1.0, False
+    t_in, t_out, axis = 0.0, 1.0, -1
+    for ax in range(3):
+        if e[ax] == 0.0:
+            if not g.lower[ax] <= p[ax] < g.upper[ax]:
+                t_in = 2.0
+            continue
+        t0, t1 = (g.lower[ax] - p[ax]) / e[ax], (g.upper[ax] - p[ax]) / e[ax]
+        near, far = min(t0, t1), max(t0, t1)
+        if near > t_in:
+            t_in, axis = near, ax
+        t_out = min(t_out, far)
+    if axis >= 0 and t_in <= t_out:  # back in across the face of ``axis``
+        inset = 1e-9 * g.h
+        at = g.lower[axis] + inset if e[axis] > 0.0 else g.upper[axis] - inset
+        q = (p[0] + t_in * e[0], p[1] + t_in * e[1], p[2] + t_in * e[2])
+        return (
+            (at if axis == 0 else q[0], at if axis == 1 else q[1], at if axis == 2 else q[2]),
+            t_in,
+            True,
+        )
+    q = (p[0] + e[0], p[1] + e[1], p[2] + e[2])
+    return q, -1.0, _buffered(q, actions, s, g)
 
 
 @njit(cache=True, inline="always")
@@ -393,9 +447,12 @@ def trace_mixing(model, mix, cloth, cells, deposits, particles, step, work):
         while alive and remaining > 0.0 and events < rules.max_hits:
             e = ((a[0] + r[0]) * remaining, (a[1] + r[1]) * remaining, (a[2] + r[2]) * remaining)
             inside, ijk, steps, t_next, t_cell, t = _start_walk(p, e, g)
-            if not inside:
-                alive = False
-                break
+            if not inside:  # beyond an open face: fly on, come back, or leave for good
+                p, entry, alive = _beyond(p, e, actions, s, g)
+                if entry < 0.0:
+                    break
+                remaining *= 1.0 - entry
+                continue
             while True:  # the pieces of the path p -> p + e, one per cell
                 t_exit = max(t, min(t_next[0], t_next[1], t_next[2], 1.0))
                 cell = (ijk[0] * ny + ijk[1]) * nz + ijk[2]
