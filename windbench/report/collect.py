@@ -466,14 +466,20 @@ def _setting(rec: RunRecord, name: str):
 def swept_keys(records: Sequence[RunRecord]) -> list[str]:
     """The dimensions: :data:`SETTINGS`, then every other config key that all complete runs
     have and that takes more than one value among them (e.g. ``aero.lift_coefficient``).
-    A ``scene.*`` key counts only if it varies among runs of one scene (e.g. a swept
-    ``scene.cloths.0.resolution``): otherwise it follows from the scene's name."""
+    A ``wind.*`` key of one backend (e.g. the particles' ``wind.lee_model``) counts when it
+    takes more than one value among the runs that have it. A ``scene.*`` key counts only
+    if it varies among runs of one scene (e.g. a swept ``scene.cloths.0.resolution``):
+    otherwise it follows from the scene's name."""
     complete = [r for r in records if r.status in ("complete", "duplicate")]
     extra = []
     if complete:
         common = set(complete[0].config)
         for r in complete[1:]:
             common &= set(r.config)
+        backend_keys = {k for r in complete for k in r.config if k.startswith("wind.")} - common
+        for key in sorted(backend_keys):
+            if len({repr(r.config[key]) for r in complete if key in r.config}) > 1:
+                extra.append(key)
         for key in sorted(common):
             if key in SETTINGS.values() or key in IGNORED:
                 continue
@@ -512,6 +518,17 @@ def summary_frame(records: Sequence[RunRecord]) -> pd.DataFrame:
     return df[[c for c in front if c in df] + [c for c in df if c not in front]]
 
 
+def _netcdf_dims(df: pd.DataFrame, dims: Sequence[str]) -> None:
+    """Dimension columns as netCDF can hold them, in place: tuples (list-valued settings)
+    as text, and a backend's key that other backends' runs lack (None, NaN) as "" when its
+    values are text (e.g. ``wind.lee_model`` of a navier_stokes run)."""
+    for c in dims:
+        if df[c].map(lambda v: isinstance(v, tuple)).any():
+            df[c] = df[c].map(str)
+        if df[c].map(lambda v: isinstance(v, str)).any():
+            df[c] = df[c].where(df[c].notna(), "")
+
+
 def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     """Complete runs -> one dataset whose dimensions are the swept settings.
 
@@ -525,9 +542,7 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
         return xr.Dataset(attrs={"runs": 0})
     df = summary_frame(good)
     df = df.drop(columns=[c for c in df if c.startswith("step_seconds_")] + ["status", "failure"])
-    for c in dims:  # tuples (list-valued settings) are not netCDF values
-        if df[c].map(lambda v: isinstance(v, tuple)).any():
-            df[c] = df[c].map(str)
+    _netcdf_dims(df, dims)
     for c in df:  # flags as 0/1 so that a missing combination can be NaN
         if df[c].map(lambda v: isinstance(v, bool | np.bool_)).all():
             df[c] = df[c].astype(float)
@@ -539,9 +554,7 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     ]
     if phase_rows:
         pf = pd.DataFrame(phase_rows)
-        for c in dims:
-            if pf[c].map(lambda v: isinstance(v, tuple)).any():
-                pf[c] = pf[c].map(str)
+        _netcdf_dims(pf, dims)
         ds = ds.merge(xr.Dataset.from_dataframe(pf.set_index([*dims, "phase"])))
         ds["step_seconds"].attrs.update(
             long_name="mean wall time per step (first step excluded)", units="s"

@@ -19,6 +19,7 @@ from windbench.report.figures import Drawn, Missing, _color, _figure
 from windbench.report.lee import Reference
 
 COST_X = "seconds_per_simulated_second"
+LEE_MODEL = "wind.lee_model"  # the particle backend's lee: paper | mixing
 RESOLUTION_MARKERS = {16: "v", 20: "<", 24: ">", 32: "o", 48: "s", 64: "D", 128: "*", 256: "P"}
 # Relative wind speed behind dense windbreaks (optical porosity < 20 %) at about half
 # their height, as summarised by Heisler & DeWalle (1988, Agric. Ecosyst. Environ.
@@ -29,12 +30,27 @@ SHELTER_RANGE = pd.DataFrame(
 SHELTER_SOURCE = "dense windbreaks, Heisler & DeWalle (1988), approximate range"
 
 
+def backend_label(wind, lee_model) -> str:
+    """The model a run stands for: the backend's name, ``particles/mixing`` for the particle
+    backend with its mixing lee (``particles`` alone is the paper's lee)."""
+    if wind == "particles" and isinstance(lee_model, str) and lee_model not in ("", "paper"):
+        return f"{wind}/{lee_model}"
+    return str(wind)
+
+
+def with_backend(df: pd.DataFrame) -> pd.DataFrame:
+    """df with a ``backend`` column (:func:`backend_label`) beside ``wind``."""
+    lee = df[LEE_MODEL] if LEE_MODEL in df else pd.Series(None, index=df.index, dtype=object)
+    return df.assign(backend=[backend_label(w, m) for w, m in zip(df["wind"], lee, strict=True)])
+
+
 def compared(df: pd.DataFrame) -> pd.DataFrame:
-    """Complete runs with a lee error that are not levels of their scene's reference."""
+    """Complete runs with a lee error that are not levels of their scene's reference, with
+    their ``backend`` (:func:`with_backend`)."""
     if df.empty or "lee_error" not in df:
-        return df.iloc[0:0]
+        return df.iloc[0:0].assign(backend=pd.Series(dtype=object))
     levels = df.get("reference_level", pd.Series(False, index=df.index)).astype(bool)
-    return df[~levels & np.isfinite(df["lee_error"].astype(float))]
+    return with_backend(df[~levels & np.isfinite(df["lee_error"].astype(float))])
 
 
 def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
@@ -48,12 +64,13 @@ def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
 
 
 def accuracy_cost_table(df: pd.DataFrame) -> pd.DataFrame:
-    """Per scene, backend and resolution: cost per simulated second and lee error (seeds
-    and time steps: mean, with the seeds' spread), Pareto front marked per scene."""
+    """Per scene, backend (the particles' lee model told apart) and resolution: cost per
+    simulated second and lee error (seeds and time steps: mean, with the seeds' spread),
+    Pareto front marked per scene."""
     d = compared(df)
     if d.empty or COST_X not in d:
         return pd.DataFrame()
-    keys = [k for k in ("scene", "wind", "resolution", "dt") if k in d]
+    keys = [k for k in ("scene", "backend", "resolution", "dt") if k in d]
     g = d.groupby(keys, sort=True)
     out = g.agg(
         runs=("lee_error", "size"),
@@ -148,9 +165,9 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
                 r["lee_error"],
                 yerr=[[r["lee_error"] - r["error_min"]], [r["error_max"] - r["lee_error"]]],
                 fmt=RESOLUTION_MARKERS.get(int(r["resolution"]), "o"),
-                color=_color(r["wind"]),
+                color=_color(r["backend"]),
                 ms=5,
-                label=r["wind"],
+                label=r["backend"],
             )
         front = sub[sub["pareto"]].sort_values("wall s per simulated s")
         ax.plot(front["wall s per simulated s"], front["lee_error"], "k--", lw=0.8)
@@ -187,15 +204,15 @@ def fig_lee_error(df: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missi
     axes = _scene_axes(fig, scenes)
     for ax, scene in zip(axes, scenes, strict=True):
         _band(ax, refs.get(scene))
-        for wind, g in d[d["scene"] == scene].groupby("wind", sort=True):
+        for backend, g in d[d["scene"] == scene].groupby("backend", sort=True):
             s = g.groupby("resolution")["lee_error"].agg(["mean", "min", "max"])
             ax.errorbar(
                 s.index,
                 s["mean"],
                 yerr=[s["mean"] - s["min"], s["max"] - s["mean"]],
                 marker="o",
-                color=_color(wind),
-                label=wind,
+                color=_color(backend),
+                label=backend,
                 capsize=2,
             )
         ax.set_xscale("log", base=2)
@@ -222,7 +239,11 @@ def wake_frame(records, refs: dict[str, Reference]) -> pd.DataFrame:
     for rec in records:
         if rec.status != "complete" or rec.wake is None:
             continue
-        label = "reference" if rec.path in ref_paths else rec.settings.get("wind")
+        label = (
+            "reference"
+            if rec.path in ref_paths
+            else backend_label(rec.settings.get("wind"), rec.config.get(LEE_MODEL))
+        )
         key = (rec.settings.get("scene"), label)
         best = finest.get(key)
         if best is None or int(rec.settings.get("resolution") or 0) > int(

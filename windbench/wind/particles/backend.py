@@ -24,6 +24,8 @@ walls and lets a cloth feel the wind that arrives at it; ``all`` applies it at e
 object, ``none`` nowhere); a head-on hit (no tangential part left) ends the particle;
 particles leave through every domain face (boundary kinds do not steer them); cloth
 triangles are obstacles at their current positions (the paper's static collision test).
+That is ``wind.lee_model=paper``, the default; ``mixing`` (:mod:`.mixing`) replaces steps
+2-4 by gusts that mix, keep their flux at bodies and fill the shadow back in.
 
 :class:`ParticleWind` keeps the model (:class:`~.tracing.GustModel` tables, emitters,
 fixed at construction) apart from the :class:`ParticleState` that :func:`advance` takes

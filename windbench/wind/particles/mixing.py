@@ -1,39 +1,34 @@
 """The ``mixing`` lee (``wind.lee_model=mixing``): gusts that mix, keep their flux and fill
 the shadow back in, at particle-tracing cost.
 
-The paper's particles stop where a body stops them, so a cell behind a fence is never
-reached (u = 0 to the outlet) and the flux of the blocked air is lost. Here a particle of
-source i is a marker of the air that source brings; its step is the Ito (Euler-Maruyama)
-step of the advection-diffusion equation dn/dt + div(n w_i) = div(K grad n),
+The paper's particles stop where a body stops them: behind a fence u = 0 to the outlet
+and the blocked air's flux is lost. Here a particle of source i marks the air it brings
+and takes the Ito (Euler-Maruyama) step of dn/dt + div(n w_i) = div(K grad n),
 
     X_{n+1} = X_n + (w_i(X_n) + dK/dz e_z) tau + sqrt(2 K(z_n) tau) xi,
 
-xi of zero mean and unit variance per axis (uniform on [-sqrt 3, sqrt 3], bounded so one
-step never jumps a wall), so that a uniform density in the divergence-free w_i stays
-uniform (the well-mixed condition) and a point release spreads with variance 2 K t per
-axis. K(z) = l(z)^2 |dU/dz| is the Navier-Stokes backend's surface-layer diffusivity of
-the sources' undisturbed profile (:func:`~windbench.wind.navier_stokes.turbulence.
-sources_viscosity`: both models mix with the same K), plus I |U| L for a source with
-inflow ``turbulence`` (Taylor: K = sigma_u L); below the lowest sheared height K keeps its
-value there, so no particle is trapped at the ground.
+xi of zero mean and unit variance per axis (uniform on [-sqrt 3, sqrt 3]: bounded, so one
+step never jumps a wall), so a uniform density in the divergence-free w_i stays uniform
+(the well-mixed condition) and a point release spreads with variance 2 K t per axis.
+K(z) = l(z)^2 |dU/dz| is the Navier-Stokes backend's surface-layer K of the sources'
+profile (``turbulence.sources_viscosity``: both models mix alike), plus I |U| L for inflow
+``turbulence`` (Taylor); below the lowest sheared height K keeps its value there.
 
-A hit splits the path velocity v = a + r: the wind a it carries keeps its speed along the
-surface, a <- |a| t_hat (t_hat the direction of a - (n.a) n, or of r's tangential part
-when the hit is head-on), so the blocked air goes over and around the body instead of
-vanishing; the random part r is mirrored, as at a wall of a diffusion problem. Wall faces
-(slip, no_slip) mirror the same way, periodic faces wrap, inflow and outflow faces let the
-particles leave. Nothing else ends a particle but ``max_age``.
+Flux kept: at a hit the carried wind a (if it points into the surface) turns along it
+with its speed kept, a <- |a| t_hat, t_hat along a - (n.a) n or, head-on, toward the box
+face's nearest edge that stands free of the domain faces (stagnation flow splits toward
+the edges); the random part is mirrored. Walls and the faces a source blows in through
+mirror, periodic faces wrap; beyond outflow faces particles fly on in a buffer of
+BUFFER_CELLS and may diffuse back. Only ``wind.max_age`` (default: none) ends them else.
 
-Cell wind: each piece of a path inside cell c adds the time spent there times the wind
-carried, d_{c,i} += dtau a, so that u_c = sum_i d_{c,i} / (n_i h^3 dt) is w_i times the
-fraction n/n_i of the source's air that reached the cell (above a fence, where the
-deflected air crowds, more than one: the speed-up), n_i = R_i / (Q_i f_max) the density of
-the undisturbed gusts (rate R_i over the volume flux Q_i of the faces they enter by; a
-profile's candidates are kept with probability f(z) / f_max so that n_i is uniform).
-Particles are conserved, so the volume flux through any plane equals the inflow's, up to
-the diffusive flux K dn/dx. Each cell keeps the running mean u <- u + (1 - e^(-dt/T))
-(u_step - u), T = ``wind.averaging_time``. Sources are uniform winds entering through the
-domain faces (a mixing lee needs a free-stream density to measure the fraction against).
+Cell wind: each piece of a path in cell c adds its time there times the carried wind,
+d_{c,i} += dtau a, and u_c = sum_i d_{c,i} / (n_i h^3 dt) is w_i times the fraction of the
+source's air that reached c (above a fence, where the deflected air crowds, more than 1:
+the speed-up); n_i = R_i / (Q_i f_max), rate over the volume flux of the faces it enters
+by, a profile's candidates kept with probability f(z) / f_max so that n_i is uniform.
+Particles are conserved, so the volume flux through any plane is the inflow's, up to the
+diffusive K dn/dx. Cells keep a running mean u <- u + (1 - e^(-dt/T)) (u_step - u),
+T = ``wind.averaging_time``. Sources must be uniform winds entering through the faces.
 """
 
 from __future__ import annotations
