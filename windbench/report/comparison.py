@@ -28,6 +28,7 @@ SHELTER_RANGE = pd.DataFrame(
     {"distance_H": [2, 5, 10, 15, 20], "low": [0.05, 0.15, 0.45, 0.65, 0.8]}
 ).assign(high=[0.3, 0.35, 0.65, 0.85, 0.95])
 SHELTER_SOURCE = "dense windbreaks, Heisler & DeWalle (1988), approximate range"
+SHELTER_HEIGHT = 0.5  # H: the height the range refers to
 
 
 def compared(df: pd.DataFrame) -> pd.DataFrame:
@@ -222,7 +223,7 @@ def wake_frame(records, refs: dict[str, Reference]) -> pd.DataFrame:
     rows = []
     finest: dict[tuple, object] = {}
     ref_paths = {r.path for r in refs.values()}
-    for rec in records:
+    for rec in [*records, *(ref.run for ref in refs.values())]:
         if rec.status != "complete" or rec.wake is None:
             continue
         label = "reference" if rec.path in ref_paths else rec.settings.get("wind")
@@ -258,10 +259,11 @@ def fig_wake(wake: pd.DataFrame) -> Drawn | Missing:
     fig = _figure(4.0 * len(heights), 3.8)
     axes = [fig.add_subplot(1, len(heights), i + 1) for i in range(len(heights))]
     for ax, height in zip(axes, heights, strict=True):
-        ax.fill_between(
-            SHELTER_RANGE["distance_H"], SHELTER_RANGE["low"], SHELTER_RANGE["high"],
-            color="0.88", label=SHELTER_SOURCE,
-        )  # fmt: skip
+        if height == SHELTER_HEIGHT:  # the measurements are at about half the height
+            ax.fill_between(
+                SHELTER_RANGE["distance_H"], SHELTER_RANGE["low"], SHELTER_RANGE["high"],
+                color="0.88", label=SHELTER_SOURCE,
+            )  # fmt: skip
         for backend, g in wake[wake["height_H"] == height].groupby("backend", sort=True):
             g = g.sort_values("distance_H")
             ax.plot(
@@ -280,6 +282,6 @@ def fig_wake(wake: pd.DataFrame) -> Drawn | Missing:
         "same height, finest run of each backend and the reference; negative values are "
         "flow back toward the fence (recirculation). The grey band is the range of "
         "measurements behind dense windbreaks at about half their height (Heisler & "
-        "DeWalle 1988, read approximately): a plausibility range, not a data set."
+        "DeWalle 1988, read approximately; drawn at 0.5 H): a plausibility range, not a data set."
     )
     return Drawn("fence_wake", title, caption, fig)
