@@ -12,7 +12,11 @@ paper lee's at the same settings, and the floor no lee without reverse flow can 
 below (:func:`reverse_flow_floor`); the smallest volume-flux ratio through the planes
 behind the scene's bodies (``metrics.plane_flux_ratio`` of the mean of the run's wind
 snapshots); the fence's u/u0 at half its height 2, 5, 10 and 15 H behind it (steady
-window); the median wind time per step and its ratio to the paper lee's.
+window) and ``wake_error``, the RMS difference of u/u0 from the reference's over the whole
+wake lattice (2-15 H behind, 0.25-1 H high: the lee box of ``lee_error`` lies within the
+first 5 H, in the reference's recirculation); the median wind time per step and its ratio
+to the paper lee's. Each scene's reference gets a row of its own (lee model
+``reference``) with its wake.
 
 The second form times both lee models in one process, alternating them over the same
 steps (the fence at 64 cells, dt 0.05 s; two_flags_wall at 40 cells, dt 0.02 s, rigid
@@ -34,7 +38,7 @@ import xarray as xr
 from windbench.cli import compose_config
 from windbench.grid import Grid
 from windbench.metrics import plane_flux_ratio
-from windbench.report.collect import find_runs, read_runs
+from windbench.report.collect import display_path, find_runs, read_runs
 from windbench.report.lee import assign_lee_errors, choose_references
 from windbench.scenes import build_scene
 from windbench.wind.base import Obstacles
@@ -67,6 +71,36 @@ def reverse_flow_floor(ref) -> float:
     return float(np.sqrt(np.mean(np.minimum(ref.lee_wind[:, 0], 0.0) ** 2)) / ref.reference_speed)
 
 
+def wake_error(wake, ref_wake) -> float:
+    """RMS over the wake lattice of u/u0 - the reference's u/u0 (NaN without both)."""
+    if wake is None or ref_wake is None:
+        return np.nan
+    return float(np.sqrt(np.nanmean((wake - ref_wake.reindex_like(wake)).to_numpy() ** 2)))
+
+
+def wake_columns(wake) -> dict:
+    """u/u0 at half the fence height at each wake distance, one column each."""
+    if wake is None:
+        return {}
+    return {f"u_over_u0_{dist:g}H": value for dist, value in wake[0.5].items()}
+
+
+def reference_rows(refs) -> list[dict]:
+    """One row per scene reference: its settings and its wake."""
+    return [
+        {
+            **{k: ref.run.settings[k] for k in SETTINGS},
+            "lee_model": "reference",
+            "wind_seconds_median": ref.run.figures.get("wind_seconds_median"),
+            **wake_columns(ref.run.wake),
+            "reference_gci": ref.gci,
+            "reference": display_path(ref.path),
+            "code": ref.run.code,
+        }
+        for ref in refs.values()
+    ]
+
+
 def run_rows(runs, references) -> pd.DataFrame:
     """One row per complete particle run (module docstring)."""
     records = read_runs(find_runs(runs), progress=False)
@@ -81,16 +115,17 @@ def run_rows(runs, references) -> pd.DataFrame:
         row["lee_error"] = rec.figures.get("lee_error")
         row["flux_behind_min"] = behind_flux(rec)
         row["wind_seconds_median"] = rec.figures.get("wind_seconds_median")
-        if rec.wake is not None:
-            for dist, value in rec.wake[0.5].items():
-                row[f"u_over_u0_{dist:g}H"] = value
+        row.update(wake_columns(rec.wake))
         ref = refs.get(rec.settings["scene"])
+        row["wake_error"] = wake_error(rec.wake, ref.run.wake) if ref else np.nan
         row["reverse_flow_floor"] = reverse_flow_floor(ref.run) if ref else np.nan
-        row["reference"] = str(ref.path) if ref else ""
+        row["reference"] = display_path(ref.path) if ref else ""
+        row["code"] = rec.code
         rows.append(row)
+    rows += reference_rows(refs)
     df = pd.DataFrame(rows).sort_values([*SETTINGS, "lee_model"])
     paper = df[df["lee_model"] == "paper"].set_index(SETTINGS)
-    for col in ("lee_error", "wind_seconds_median"):
+    for col in ("lee_error", "wake_error", "wind_seconds_median"):
         base = paper[col].reindex(df.set_index(SETTINGS).index).to_numpy()
         df[f"{col}_over_paper"] = df[col].to_numpy() / base
     return df
