@@ -19,9 +19,10 @@ to the paper lee's. Each scene's reference gets a row of its own (lee model
 ``reference``) with its wake.
 
 The second form times both lee models in one process, alternating them over the same
-steps (the fence at 64 cells, dt 0.05 s; two_flags_wall at 40 cells, dt 0.02 s, rigid
-bodies only), after the spin-up, and writes the median step time of each and their ratio
-to ``lee_mixing_cost.csv`` (wall and CPU seconds; the 1-minute load average beside them).
+steps (the fence at 64 cells, dt 0.05 s; two_flags_wall at 40 cells, dt 0.02 s, with the
+wall alone and with its two flags held still at their rest shape), after the spin-up, and
+writes the median step time of each and their ratio to ``lee_mixing_cost.csv`` (wall and
+CPU seconds; the 1-minute load average beside them).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import pandas as pd
 import xarray as xr
 
 from windbench.cli import compose_config
+from windbench.cloth.model import ClothModel
 from windbench.grid import Grid
 from windbench.metrics import plane_flux_ratio
 from windbench.report.collect import display_path, find_runs, read_runs
@@ -47,7 +49,8 @@ from windbench.wind.primitives import superpose
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SETTINGS = ["scene", "resolution", "dt", "seed"]
-COST_CASES = {"fence": (64, 0.05), "two_flags_wall": (40, 0.02)}
+COST_CASES = [("fence", 64, 0.05, False), ("two_flags_wall", 40, 0.02, False)]
+COST_CASES.append(("two_flags_wall", 40, 0.02, True))  # (scene, cells, dt, with its cloth)
 
 
 def behind_flux(rec) -> float:
@@ -137,12 +140,21 @@ def _wind(scene, resolution, lee_model):
     return ParticleWind(scene, grid, params)
 
 
+def still_obstacles(scene, with_cloth: bool) -> Obstacles:
+    """The scene's rigid bodies, and its cloth at rest if ``with_cloth``."""
+    if not with_cloth:
+        return Obstacles.rigid_only(scene.bodies)
+    cloth = ClothModel.from_meshes(scene.cloths)
+    still = np.zeros_like(cloth.rest_positions)
+    return Obstacles(tuple(scene.bodies), cloth.rest_positions, still, cloth.triangles)
+
+
 def cost_rows(steps: int) -> pd.DataFrame:
     """Median wall and CPU time per step of both lee models, alternated step by step."""
     rows = []
-    for name, (resolution, dt) in COST_CASES.items():
+    for name, resolution, dt, with_cloth in COST_CASES:
         scene = build_scene(compose_config([f"scene={name}"]).scene)
-        obstacles = Obstacles.rigid_only(scene.bodies)
+        obstacles = still_obstacles(scene, with_cloth)
         winds = {m: _wind(scene, resolution, m) for m in ("paper", "mixing")}
         spinup = int(round(2 * (scene.upper - scene.lower)[0] / scene.reference_speed / dt))
         for wind in winds.values():
@@ -155,7 +167,8 @@ def cost_rows(steps: int) -> pd.DataFrame:
                 wind.step(dt, obstacles)
                 times[m][0].append(time.perf_counter() - w0)
                 times[m][1].append(time.process_time() - c0)
-        row = {"scene": name, "resolution": resolution, "dt": dt, "steps": steps}
+        row = {"scene": name, "cloth": with_cloth, "resolution": resolution, "dt": dt}
+        row["steps"] = steps
         for m, (wall, cpu) in times.items():
             row[f"{m}_wall_s"], row[f"{m}_cpu_s"] = np.median(wall), np.median(cpu)
             row[f"{m}_particles"] = winds[m].stats()["live_particles"]
