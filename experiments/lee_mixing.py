@@ -16,7 +16,8 @@ window) and ``wake_error``, the RMS difference of u/u0 from the reference's over
 wake lattice (2-15 H behind, 0.25-1 H high: the lee box of ``lee_error`` lies within the
 first 5 H, in the reference's recirculation); the median wind time per step and its ratio
 to the paper lee's. Each scene's reference gets a row of its own (lee model
-``reference``) with its wake.
+``reference``) with its wake, its levels (resolutions), the lee difference of its two
+finest levels, the order used and its GCI (:mod:`windbench.report.lee`).
 
 The second form times both lee models in one process, alternating them over the same
 steps (the fence at 64 cells, dt 0.05 s; two_flags_wall at 40 cells, dt 0.02 s, with the
@@ -96,6 +97,9 @@ def reference_rows(refs) -> list[dict]:
             "lee_model": "reference",
             "wind_seconds_median": ref.run.figures.get("wind_seconds_median"),
             **wake_columns(ref.run.wake),
+            "reference_levels": "/".join(str(lv.settings["resolution"]) for lv in ref.levels),
+            "reference_difference": ref.difference,
+            "reference_order": ref.order,
             "reference_gci": ref.gci,
             "reference": display_path(ref.path),
             "code": ref.run.code,
