@@ -516,7 +516,7 @@ class NavierStokesWind(WindField):
         )
         rhs_norm = self.poisson.rhs_norm  # ||rhs||_2, computed by the solve
         for a in range(3):
-            subtract_gradient(self.q[a], a, self.psi, self.free[a], self.periodic)
+            subtract_gradient(self.q[a], a, self.psi, self.free[a], self.periodic, 1.0)
             boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], False)
         self._cell_valid = False
         return iters, res, rhs_norm
