@@ -47,30 +47,22 @@ def face_flux(u, v, w, target, out):
 @njit(cache=True, parallel=True)
 def divergence_norms(u, v, w, target, solid):
     """(max, sum of squares, count) of h div u - target over the air cells, by planes."""
-    nx = solid.shape[0]
+    nx, ny, nz = solid.shape
     peak = np.zeros(nx)
     squares = np.zeros(nx)
     count = np.zeros(nx, dtype=np.int64)
     for i in prange(nx):
-        peak[i], squares[i], count[i] = _divergence_plane(u, v, w, target, solid, np.int64(i))
+        top, sq, cnt = 0.0, 0.0, 0  # per plane in registers, stored once
+        for j in range(ny):
+            for k in range(nz):
+                if solid[i, j, k]:
+                    continue
+                d = abs(_outward_flux(u, v, w, i, j, k) - target[i, j, k])
+                top = max(top, d)
+                sq += d * d
+                cnt += 1
+        peak[i], squares[i], count[i] = top, sq, cnt
     return peak.max(), ordered_sum(squares), count.sum()
-
-
-@njit(cache=True, error_model="numpy")
-def _divergence_plane(u, v, w, target, solid, i):
-    """(max, sum of squares, count) of |h div u - target| over the air cells of plane i
-    (the parallel loop's body in a function of its own, with the error model numba gives
-    such a body: less to compile, the same bits)."""
-    top, sq, cnt = 0.0, 0.0, 0
-    for j in range(solid.shape[1]):
-        for k in range(solid.shape[2]):
-            if solid[i, j, k]:
-                continue
-            d = abs(_outward_flux(u, v, w, i, j, k) - target[i, j, k])
-            top = max(top, d)
-            sq += d * d
-            cnt += 1
-    return top, sq, cnt
 
 
 @njit(cache=True, parallel=True)
@@ -86,30 +78,32 @@ def max_abs(q):
     return peak.max()
 
 
-@njit(cache=True, parallel=True)
-def subtract_gradient(q, a, psi, free, periodic, scale):
-    """q_f -= scale (psi_+ - psi_-) on the free faces of component a (ghost psi = 0 at
-    openings). ``scale`` 1.0 is the projection itself; the second-order step also subtracts
-    the previous step's pressure gradient with the scale that makes it (dt/2) grad p.
-    (The loop's body stays inline here: in a function of its own it rounded differently.)"""
+@njit(cache=True, inline="always")
+def psi_difference(psi, a, I, J, K, periodic):
+    """psi_+ - psi_- across the padded face (I, J, K) of component a: ghost psi = 0 beyond
+    an opening or outflow face, the wrapped cell across a periodic one."""
     nx, ny, nz = psi.shape
-    n_a = psi.shape[a]
+    ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
+    along = ip if a == 0 else (jp if a == 1 else kp)  # index of the + cell
+    plus = psi[ip, jp, kp] if along < psi.shape[a] else 0.0
+    if along >= 1:
+        minus = psi[im, jm, km]
+    elif periodic[a]:
+        minus = psi[im % nx, jm % ny, km % nz]
+    else:
+        minus = 0.0
+    return plus - minus
+
+
+@njit(cache=True, parallel=True)
+def subtract_gradient(q, a, psi, free, periodic):
+    """q_f -= psi_+ - psi_- on the free faces of component a (the projection)."""
     P0, P1, P2 = q.shape
     for I in prange(1, P0 - 1):
         for J in range(1, P1 - 1):
             for K in range(1, P2 - 1):
-                if not free[I, J, K]:
-                    continue
-                ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
-                along = ip if a == 0 else (jp if a == 1 else kp)  # index of the + cell
-                plus = psi[ip, jp, kp] if along < n_a else 0.0
-                if along >= 1:
-                    minus = psi[im, jm, km]
-                elif periodic[a]:
-                    minus = psi[im % nx, jm % ny, km % nz]
-                else:
-                    minus = 0.0
-                q[I, J, K] -= scale * (plus - minus)  # u_f <- u_f - (psi_+ - psi_-)
+                if free[I, J, K]:
+                    q[I, J, K] -= psi_difference(psi, a, I, J, K, periodic)
 
 
 @njit(cache=True)
@@ -129,13 +123,20 @@ def cell_centred(u, v, w, solid, out):
                 out[i, j, k, 2] = 0.5 * (w[i + 1, j + 1, k + 1] + w[i + 1, j + 1, k + 2])
 
 
+@njit(cache=True)
 def face_weights(free, a, periodic, out):
     """Poisson face weights of axis a (unpadded faces) from the free-face mask."""
     n0, n1, n2 = out.shape
-    out[...] = free[1 : n0 + 1, 1 : n1 + 1, 1 : n2 + 1]
+    for i in range(n0):
+        for j in range(n1):
+            for k in range(n2):
+                out[i, j, k] = free[i + 1, j + 1, k + 1]
     if periodic[a] and out.shape[a] == 2:  # one periodic cell: the face meets itself
         out[...] = 0.0
     elif periodic[a]:  # the duplicate last face carries the first one's weight
-        last, first = [slice(None)] * 3, [slice(None)] * 3
-        last[a], first[a] = out.shape[a] - 1, 0
-        out[tuple(last)] = out[tuple(first)]
+        if a == 0:
+            out[n0 - 1] = out[0]
+        elif a == 1:
+            out[:, n1 - 1] = out[:, 0]
+        else:
+            out[:, :, n2 - 1] = out[:, :, 0]
