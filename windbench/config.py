@@ -110,7 +110,9 @@ class SimConfig:
     max_steps: int = setting(
         100_000, "1", "largest step count (sim.duration / sim.dt) accepted", ge=1
     )
-    progress: bool = setting(True, "", "progress bar (only on a terminal)")
+    progress: bool = setting(
+        True, "", "progress bar on a terminal, else a log line every tenth of the run"
+    )
     fail_at_step: int | None = setting(
         None, "1", "fault injection: the run diverges at this step (tests)", ge=1
     )
@@ -214,6 +216,17 @@ class ResumeConfig:
 
 
 @dataclass
+class RuntimeConfig:
+    """How a run uses the machine (windbench.runtime); not part of its numbers."""
+
+    threads: Any = setting(
+        "auto",
+        "1",
+        "numba threads of the run; auto: the cores available / the launcher's parallel runs",
+    )
+
+
+@dataclass
 class WindbenchConfig:
     wind: Any = MISSING
     scene: SceneConfig = MISSING
@@ -224,6 +237,7 @@ class WindbenchConfig:
     output: OutputConfig = field(default_factory=OutputConfig)
     seed: int = setting(0, "1", "random seed (particle emission)", ge=0, le=2**32 - 1)
     resume: ResumeConfig = field(default_factory=ResumeConfig)
+    runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
     experiment: str | None = None
 
 

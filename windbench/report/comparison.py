@@ -16,7 +16,7 @@ import pandas as pd
 from matplotlib.ticker import NullFormatter
 
 from windbench.report.collect import display_path
-from windbench.report.figures import Drawn, Missing, _color, _figure
+from windbench.report.figures import Drawn, Missing, _color, _figure, timed
 from windbench.report.lee import Reference
 
 COST_X = "seconds_per_simulated_second"
@@ -65,18 +65,24 @@ def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
     return front
 
 
-def accuracy_cost_table(df: pd.DataFrame) -> pd.DataFrame:
+def accuracy_cost_table(df: pd.DataFrame, contended: bool = False) -> pd.DataFrame:
     """Per scene, backend (the particles' lee model told apart) and resolution: cost per
     simulated second and lee error (seeds and time steps: mean, with the seeds' spread),
-    Pareto front marked per scene."""
+    Pareto front marked per scene. The cost is the median over the runs whose timings hold
+    (:func:`~windbench.report.figures.timed`; ``contended`` counts those left out of it,
+    NaN cost where none is left)."""
     d = compared(df)
     if d.empty or COST_X not in d:
         return pd.DataFrame()
+    d = d.assign(timed_cost=np.nan)
+    kept = timed(d, contended).index
+    d.loc[kept, "timed_cost"] = d.loc[kept, COST_X]
     keys = [k for k in ("scene", "backend", "resolution", "dt") if k in d]
     g = d.groupby(keys, sort=True)
     out = g.agg(
         runs=("lee_error", "size"),
-        cost=(COST_X, "median"),
+        contended=("timed_cost", lambda c: int(c.isna().sum())),
+        cost=("timed_cost", "median"),
         lee_error=("lee_error", "mean"),
         error_min=("lee_error", "min"),
         error_max=("lee_error", "max"),
@@ -84,7 +90,10 @@ def accuracy_cost_table(df: pd.DataFrame) -> pd.DataFrame:
     out["pareto"] = False
     for _, idx in out.groupby("scene").groups.items():
         sub = out.loc[idx]
-        out.loc[idx, "pareto"] = pareto_front(sub["cost"].values, sub["lee_error"].values)
+        finite = np.isfinite(sub["cost"].values)
+        front = np.zeros(len(sub), dtype=bool)
+        front[finite] = pareto_front(sub["cost"].values[finite], sub["lee_error"].values[finite])
+        out.loc[idx, "pareto"] = front
     return out.rename(columns={"cost": "wall s per simulated s"})
 
 
