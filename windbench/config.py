@@ -106,7 +106,11 @@ class SimConfig:
     spinup: Any = setting(
         "auto", "s", "simulated before recording starts; auto: two flow-through times"
     )
-    duration: float = setting(1.0, "s", "simulated time recorded after the spin-up", gt=0)
+    duration: Any = setting(
+        1.0,
+        "s",
+        "simulated time recorded after the spin-up; auto: one flow-through time, at least 1 s",
+    )
     max_steps: int = setting(
         100_000, "1", "largest step count (sim.duration / sim.dt) accepted", ge=1
     )
