@@ -99,7 +99,9 @@ def bench_case(resolution, frames: int, warmup: int, extra: list[str]) -> dict:
 def timed_frames(overrides: list[str], frames: int, warmup: int) -> dict:
     """Median and best frame times of a run of ``overrides`` after ``warmup`` frames."""
     duration = (frames + warmup) / 60.0
-    cfg = compose_config([*overrides, f"sim.duration={duration}", "sim.progress=false"])
+    cfg = compose_config(
+        [*overrides, f"sim.duration={duration}", "sim.spinup=0", "sim.progress=false"]
+    )
     sim = Simulation(prepare(cfg))
     for n in range(warmup):
         sim.step(n)

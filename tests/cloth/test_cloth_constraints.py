@@ -10,6 +10,7 @@ import pytest
 
 from windbench.cloth.constraints import (
     fast_atan2,
+    limit_edges,
     project_hinge,
     project_shear_edges,
     project_tethers,
@@ -176,3 +177,21 @@ def test_a_rigid_shear_edge_gets_its_length_and_keeps_its_centre_of_mass():
     assert (
         lam[0] == 0.0 and lam[2] == 0.0 and lam[1] == pytest.approx(-0.25)
     )  # (L - l) / (w_i + w_j)
+
+
+def test_edge_strain_limit_moves_only_the_edges_over_the_trigger():
+    """An edge 20 % long is brought to exactly (1 + limit) L along its line, its centre of
+    mass kept; one 3.2 % long (under the trigger 1 + 1.1 x 3 %) and one between two pins are
+    left alone; only the moved edge's vertices are flagged."""
+    p = np.array([[0, 0, 0], [0, 0, 1.2], [5, 0, 0], [5, 0, 1.032], [9, 0, 0], [9, 0, 2]], float)
+    inv_mass = np.array([1.0, 3.0, 1.0, 1.0, 0.0, 0.0])
+    edges = np.array([[0, 1], [2, 3], [4, 5]])
+    rest = np.ones(3)
+    x, moved = p.copy(), np.zeros(6, bool)
+    assert limit_edges(p, inv_mass, edges, rest, 0, 3, 0.03, moved) == 1
+    assert p[1, 2] - p[0, 2] == pytest.approx(1.03, rel=1e-14)
+    np.testing.assert_allclose(p[:2, :2], 0.0, atol=0)
+    mass = 1.0 / inv_mass[:2]
+    np.testing.assert_allclose(mass @ p[:2], mass @ x[:2], rtol=1e-14)
+    np.testing.assert_array_equal(p[2:], x[2:])
+    np.testing.assert_array_equal(moved, [True, True, False, False, False, False])

@@ -264,6 +264,44 @@ def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, wo
     return solved
 
 
+@njit(cache=True, inline="always")
+def limit_edge(p, inv_mass, i, j, rest, limit, trigger2):
+    """Strain limit of one edge (Provot 1995): if it is longer than ``sqrt(trigger2) L``, bring
+    it to ``(1 + limit) L`` as a rigid constraint, ``dlambda = -C / (w_i + w_j)``. Returns
+    whether it moved the edge."""
+    dx, dy, dz = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1], p[i, 2] - p[j, 2]
+    ln2 = dx * dx + dy * dy + dz * dz
+    w = inv_mass[i] + inv_mass[j]
+    if w == 0.0 or ln2 <= trigger2 * rest * rest:
+        return False
+    ln = math.sqrt(ln2)
+    s = ((1.0 + limit) * rest - ln) / (w * ln)
+    si, sj = inv_mass[i] * s, inv_mass[j] * s
+    p[i, 0] += si * dx
+    p[i, 1] += si * dy
+    p[i, 2] += si * dz
+    p[j, 0] -= sj * dx
+    p[j, 1] -= sj * dy
+    p[j, 2] -= sj * dz
+    return True
+
+
+@njit(cache=True)
+def limit_edges(p, inv_mass, edges, rest, first, last, limit, moved):
+    """One strain-limit pass edge by edge over ``edges[first:last]`` (:func:`limit_edge`, a
+    trigger of ``1 + (1 + LIMIT_SLACK) limit`` as for the chains), in place; the vertices it
+    moves are flagged in ``moved``. Returns how many edges it moved."""
+    trigger = 1.0 + (1.0 + LIMIT_SLACK) * limit
+    trigger2 = trigger * trigger
+    projected = 0
+    for e in range(first, last):
+        i, j = edges[e, 0], edges[e, 1]
+        if limit_edge(p, inv_mass, i, j, rest[e], limit, trigger2):
+            projected += 1
+            moved[i] = moved[j] = True
+    return projected
+
+
 @njit(cache=True)
 def project_shear_edges(p, inv_mass, edges, rest, alpha, scale, lam, first):
     """One XPBD projection of each edge from ``first`` on (the shear edges), in order.
