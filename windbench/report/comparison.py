@@ -13,13 +13,14 @@ import math
 
 import numpy as np
 import pandas as pd
+from matplotlib.ticker import NullFormatter
 
 from windbench.report.collect import display_path
 from windbench.report.figures import Drawn, Missing, _color, _figure
 from windbench.report.lee import Reference
 
 COST_X = "seconds_per_simulated_second"
-RESOLUTION_MARKERS = {16: "v", 20: "<", 24: ">", 32: "o", 48: "s", 64: "D", 128: "*", 256: "P"}
+RESOLUTION_MARKERS = "v<osD*Ph>"  # by rank of the resolutions in a table, coarsest first
 # Relative wind speed behind dense windbreaks (optical porosity < 20 %) at about half
 # their height, as summarised by Heisler & DeWalle (1988, Agric. Ecosyst. Environ.
 # 22/23: 41-69): an approximate range read from their review, for plausibility only.
@@ -27,6 +28,7 @@ SHELTER_RANGE = pd.DataFrame(
     {"distance_H": [2, 5, 10, 15, 20], "low": [0.05, 0.15, 0.45, 0.65, 0.8]}
 ).assign(high=[0.3, 0.35, 0.65, 0.85, 0.95])
 SHELTER_SOURCE = "dense windbreaks, Heisler & DeWalle (1988), approximate range"
+SHELTER_HEIGHT = 0.5  # H: the height the range refers to
 
 
 def compared(df: pd.DataFrame) -> pd.DataFrame:
@@ -111,10 +113,12 @@ def window_table(records) -> pd.DataFrame:
     return d.groupby("scene", sort=True).agg(["min", "max"]).reset_index()
 
 
-def _scene_axes(fig, scenes):
+def _scene_panels(scenes):
+    """A figure with one panel per scene, three to a row: (figure, axes)."""
     cols = min(len(scenes), 3)
     rows = math.ceil(len(scenes) / cols)
-    return [fig.add_subplot(rows, cols, i + 1) for i in range(len(scenes))]
+    fig = _figure(4.0 * cols, 3.4 * rows + 0.8)
+    return fig, [fig.add_subplot(rows, cols, i + 1) for i in range(len(scenes))]
 
 
 def _band(ax, ref: Reference | None):
@@ -128,7 +132,7 @@ def _legend_below(fig, handles_axes):
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             handles.setdefault(lab, h)
             labels[lab] = lab
-    fig.legend(handles.values(), labels.values(), loc="lower center", ncol=4, fontsize=7)
+    fig.legend(handles.values(), labels.values(), loc="outside lower center", ncol=4, fontsize=7)
 
 
 def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missing:
@@ -137,8 +141,8 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
     if table.empty:
         return Missing("accuracy_vs_cost", title, "runs with a lee error and a reference")
     scenes = sorted(table["scene"].unique())
-    fig = _figure(4.0 * min(len(scenes), 3), 3.4 * math.ceil(len(scenes) / 3) + 0.8)
-    axes = _scene_axes(fig, scenes)
+    fig, axes = _scene_panels(scenes)
+    markers = dict(zip(sorted(table["resolution"].unique()), RESOLUTION_MARKERS, strict=False))
     for ax, scene in zip(axes, scenes, strict=True):
         sub = table[table["scene"] == scene]
         _band(ax, refs.get(scene))
@@ -147,7 +151,7 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
                 r["wall s per simulated s"],
                 r["lee_error"],
                 yerr=[[r["lee_error"] - r["error_min"]], [r["error_max"] - r["lee_error"]]],
-                fmt=RESOLUTION_MARKERS.get(int(r["resolution"]), "o"),
+                fmt=markers.get(r["resolution"], "o"),
                 color=_color(r["wind"]),
                 ms=5,
                 label=r["wind"],
@@ -155,16 +159,15 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
         front = sub[sub["pareto"]].sort_values("wall s per simulated s")
         ax.plot(front["wall s per simulated s"], front["lee_error"], "k--", lw=0.8)
         ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(scene, fontsize=9)
         ax.set_xlabel("wall s per simulated s")
         ax.set_ylabel("lee error / U")
         ax.grid(True, which="both", alpha=0.3)
-    for res, marker in RESOLUTION_MARKERS.items():
-        if (table["resolution"] == res).any():
-            axes[0].plot([], [], marker, color="0.4", label=f"{res} cells")
+    for res, marker in markers.items():
+        axes[0].plot([], [], marker, color="0.4", label=f"{res} cells")
     axes[0].plot([], [], "k--", lw=0.8, label="Pareto front")
     _legend_below(fig, axes)
-    fig.subplots_adjust(bottom=0.22, hspace=0.5, wspace=0.35)
     caption = (
         "Every backend and resolution as a point: wall time per simulated second (median "
         "step over the steady window, divided by dt) against the lee error (RMS wind "
@@ -183,8 +186,7 @@ def fig_lee_error(df: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missi
     if d.empty:
         return Missing("lee_error_vs_resolution", title, "runs with a lee error and a reference")
     scenes = sorted(d["scene"].unique())
-    fig = _figure(4.0 * min(len(scenes), 3), 3.4 * math.ceil(len(scenes) / 3) + 0.8)
-    axes = _scene_axes(fig, scenes)
+    fig, axes = _scene_panels(scenes)
     for ax, scene in zip(axes, scenes, strict=True):
         _band(ax, refs.get(scene))
         for wind, g in d[d["scene"] == scene].groupby("wind", sort=True):
@@ -199,13 +201,15 @@ def fig_lee_error(df: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missi
                 capsize=2,
             )
         ax.set_xscale("log", base=2)
+        resolutions = sorted(d.loc[d["scene"] == scene, "resolution"].unique())
+        ax.set_xticks(resolutions, [str(r) for r in resolutions])
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(scene, fontsize=9)
         ax.set_xlabel("cells along the longest axis")
         ax.set_ylabel("lee error / U")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].fill_between([], [], color="0.85", label="reference uncertainty (GCI)")
     _legend_below(fig, axes)
-    fig.subplots_adjust(bottom=0.22, hspace=0.5, wspace=0.35)
     caption = (
         "Mean over time steps and seeds, bars from the smallest to the largest; grey: the "
         "reference's grid-convergence index, below which differences are not resolved."
@@ -219,7 +223,7 @@ def wake_frame(records, refs: dict[str, Reference]) -> pd.DataFrame:
     rows = []
     finest: dict[tuple, object] = {}
     ref_paths = {r.path for r in refs.values()}
-    for rec in records:
+    for rec in [*records, *(ref.run for ref in refs.values())]:
         if rec.status != "complete" or rec.wake is None:
             continue
         label = "reference" if rec.path in ref_paths else rec.settings.get("wind")
@@ -255,10 +259,11 @@ def fig_wake(wake: pd.DataFrame) -> Drawn | Missing:
     fig = _figure(4.0 * len(heights), 3.8)
     axes = [fig.add_subplot(1, len(heights), i + 1) for i in range(len(heights))]
     for ax, height in zip(axes, heights, strict=True):
-        ax.fill_between(
-            SHELTER_RANGE["distance_H"], SHELTER_RANGE["low"], SHELTER_RANGE["high"],
-            color="0.88", label=SHELTER_SOURCE,
-        )  # fmt: skip
+        if height == SHELTER_HEIGHT:  # the measurements are at about half the height
+            ax.fill_between(
+                SHELTER_RANGE["distance_H"], SHELTER_RANGE["low"], SHELTER_RANGE["high"],
+                color="0.88", label=SHELTER_SOURCE,
+            )  # fmt: skip
         for backend, g in wake[wake["height_H"] == height].groupby("backend", sort=True):
             g = g.sort_values("distance_H")
             ax.plot(
@@ -272,12 +277,11 @@ def fig_wake(wake: pd.DataFrame) -> Drawn | Missing:
         ax.set_ylabel("u / u0 (window mean)")
         ax.grid(True, alpha=0.3)
     _legend_below(fig, axes)
-    fig.subplots_adjust(bottom=0.3, wspace=0.35)
     caption = (
         "Time-mean wind along the flow behind the fence over the undisturbed wind at the "
         "same height, finest run of each backend and the reference; negative values are "
         "flow back toward the fence (recirculation). The grey band is the range of "
         "measurements behind dense windbreaks at about half their height (Heisler & "
-        "DeWalle 1988, read approximately): a plausibility range, not a data set."
+        "DeWalle 1988, read approximately; drawn at 0.5 H): a plausibility range, not a data set."
     )
     return Drawn("fence_wake", title, caption, fig)

@@ -53,6 +53,7 @@ from windbench.wind.navier_stokes import (
     boundaries,
     coupling,
     diffusion,
+    trapezoid,
     turbulence,
 )
 from windbench.wind.navier_stokes.boundaries import (
@@ -378,15 +379,15 @@ class NavierStokesWind(WindField):
             for a in range(3):
                 self.old[a][...] = self.q[a]
         for a in range(3):
-            np.multiply(self.old[a], -0.5, out=self.old[a])  # u^n+1/2 = 3/2 u^n - 1/2 u^n-1
-            self.old[a] += 1.5 * self.q[a]
+            trapezoid.midpoint_velocity(self.q[a], self.old[a])
         scale = self._pressure_scale * (dt / self._last_dt if self._last_dt else 0.0)
         beta = 0.5 * self.viscosity * dt / self.h**2
         w = self.rhs_w
         for a in range(3):
-            diffusion.explicit_step(self.q[a], w[a], beta, self.axes, self.free[a])
-            if scale != 0.0:
-                subtract_gradient(w[a], a, self.psi, self.free[a], self.periodic, scale)
+            trapezoid.carried_field(
+                self.q[a], a, self.psi, scale, beta, self.axes, self.free[a], self.periodic,
+                w[a],
+            )  # fmt: skip
         self._fill(w)
         self._carry(dt_h, w, self.work2, bounds=True, velocity=self.old)
         self._fill(self.work2)

@@ -118,28 +118,3 @@ def jacobi_first_sweep(q0, out, alpha, axes, free, changes, peaks):
                 change = max(change, abs(new - qc[K]))
                 peak = max(peak, abs(qc[K]))
         changes[I], peaks[I] = change, peak
-
-
-@njit(cache=True, parallel=True, fastmath=FAST_MATH)
-def explicit_step(q, out, beta, axes, free):
-    """out = q + beta sum_nb (q_nb - q) on the free faces, out = q on every other element:
-    the explicit half of Crank-Nicolson viscosity, beta = nu dt / (2 h^2) (its implicit
-    half is the solve above with alpha = beta). Ghosts must hold the boundary values."""
-    P0, P1, P2 = q.shape
-    d = 2.0 * (axes[0] + axes[1] + axes[2])
-    all_axes = axes[0] != 0 and axes[1] != 0 and axes[2] != 0
-    for I in prange(P0):
-        for J in range(P1):
-            qc, oc, fc = q[I, J], out[I, J], free[I, J]
-            if not (0 < I < P0 - 1 and 0 < J < P1 - 1):
-                for K in range(P2):
-                    oc[K] = qc[K]
-                continue
-            xm, xp, ym, yp = q[I - 1, J], q[I + 1, J], q[I, J - 1], q[I, J + 1]
-            oc[0], oc[P2 - 1] = qc[0], qc[P2 - 1]
-            for K in range(1, P2 - 1):
-                if fc[K]:
-                    nb = _neighbour_sum(xm, xp, ym, yp, qc, K, axes, all_axes)
-                    oc[K] = qc[K] + beta * (nb - d * qc[K])
-                else:
-                    oc[K] = qc[K]

@@ -78,29 +78,32 @@ def max_abs(q):
     return peak.max()
 
 
-@njit(cache=True, parallel=True)
-def subtract_gradient(q, a, psi, free, periodic, scale=1.0):
-    """q_f -= scale (psi_+ - psi_-) on the free faces of component a (ghost psi = 0 at
-    openings). ``scale`` 1 is the projection itself; the second-order step also subtracts
-    the previous step's pressure gradient with the scale that makes it (dt/2) grad p."""
+@njit(cache=True, inline="always")
+def psi_difference(psi, a, I, J, K, periodic):
+    """psi_+ - psi_- across the padded face (I, J, K) of component a: ghost psi = 0 beyond
+    an opening or outflow face, the wrapped cell across a periodic one."""
     nx, ny, nz = psi.shape
-    n_a = psi.shape[a]
+    ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
+    along = ip if a == 0 else (jp if a == 1 else kp)  # index of the + cell
+    plus = psi[ip, jp, kp] if along < psi.shape[a] else 0.0
+    if along >= 1:
+        minus = psi[im, jm, km]
+    elif periodic[a]:
+        minus = psi[im % nx, jm % ny, km % nz]
+    else:
+        minus = 0.0
+    return plus - minus
+
+
+@njit(cache=True, parallel=True)
+def subtract_gradient(q, a, psi, free, periodic):
+    """q_f -= psi_+ - psi_- on the free faces of component a (the projection)."""
     P0, P1, P2 = q.shape
     for I in prange(1, P0 - 1):
         for J in range(1, P1 - 1):
             for K in range(1, P2 - 1):
-                if not free[I, J, K]:
-                    continue
-                ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
-                along = ip if a == 0 else (jp if a == 1 else kp)  # index of the + cell
-                plus = psi[ip, jp, kp] if along < n_a else 0.0
-                if along >= 1:
-                    minus = psi[im, jm, km]
-                elif periodic[a]:
-                    minus = psi[im % nx, jm % ny, km % nz]
-                else:
-                    minus = 0.0
-                q[I, J, K] -= scale * (plus - minus)  # u_f <- u_f - (psi_+ - psi_-)
+                if free[I, J, K]:
+                    q[I, J, K] -= psi_difference(psi, a, I, J, K, periodic)
 
 
 @njit(cache=True)
