@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from windbench.cloth.constraints import (
+    edge_stretch,
     fast_atan2,
     limit_edges,
     project_hinge,
@@ -195,3 +196,12 @@ def test_edge_strain_limit_moves_only_the_edges_over_the_trigger():
     np.testing.assert_allclose(mass @ p[:2], mass @ x[:2], rtol=1e-14)
     np.testing.assert_array_equal(p[2:], x[2:])
     np.testing.assert_array_equal(moved, [True, True, False, False, False, False])
+
+
+def test_edge_stretch_gives_the_largest_elongation_and_the_edges_beyond_a_limit():
+    x = np.array([[0.0, 0, 0], [1.1, 0, 0], [1.1, 2.02, 0], [0, 0, 0.5]])
+    edges = np.array([[0, 1], [1, 2], [0, 3]])
+    rest = np.array([1.0, 2.0, 0.5])  # stretched by 10 %, 1 %, 0
+    top, over = edge_stretch(x, edges, rest, 0.03)
+    assert top == pytest.approx(0.1, rel=1e-12) and over == 1
+    assert edge_stretch(x, edges, rest, 0.005)[1] == 2

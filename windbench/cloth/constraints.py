@@ -406,11 +406,15 @@ def damp_velocities(x, v, inv_mass, edges, edge_c, hinges, hinge_c, dt):
 
 
 @njit(cache=True)
-def max_edge_stretch(x, edges, rest):
-    """max_e |x_i - x_j| / L_e - 1 over the edges (i, j) of ``edges`` (as many as ``rest``)."""
+def edge_stretch(x, edges, rest, limit):
+    """(max_e |x_i - x_j| / L_e - 1, how many edges are longer than (1 + limit) L_e) over
+    the edges (i, j) of ``edges`` (as many as ``rest``)."""
     top = -np.inf
+    over = 0
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
         dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
-        top = max(top, math.sqrt(dx * dx + dy * dy + dz * dz) / rest[e] - 1.0)
-    return top
+        s = math.sqrt(dx * dx + dy * dy + dz * dz) / rest[e] - 1.0
+        top = max(top, s)
+        over += s > limit
+    return top, over

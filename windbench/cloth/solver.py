@@ -51,10 +51,11 @@ from numba import njit
 
 from windbench.cloth.collision import body_boxes, contact_vertex, max_penetration
 from windbench.cloth.constraints import (
+    LIMIT_SLACK,
     damp_velocities,
+    edge_stretch,
     hinge_weights,
     limit_edges,
-    max_edge_stretch,
     project_hinges,
     project_shear_edges,
     project_tethers,
@@ -181,7 +182,14 @@ def _strain_limit(model, frame, p, xp, work, normal):
     (:func:`~windbench.cloth.constraints.solve_chains`), all contacts again after each pass
     that moved one; the edges of irregular cloths one by one
     (:func:`~windbench.cloth.constraints.limit_edges`), the contacts of the vertices they
-    moved once after the last pass."""
+    moved once after the last pass.
+
+    The limit is a projection that the contacts override and that stops after
+    ``limit_passes`` passes. On a lattice each pass solves whole threads and the pins'
+    tethers carry the load, so it holds. An irregular garment held by the bodies alone (no
+    pins) is limited edge by edge, each pass carrying a correction only a few edges far:
+    where the wind presses it on the body its largest stretch stays above the limit, by as
+    much as ``max_stretch`` and ``over_strain_limit`` (:meth:`XPBDCloth.stretch`) record."""
     c, s = model.constraints, model.settings
     _, lam, chain_work, moved, clear = work
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
@@ -515,6 +523,12 @@ class XPBDCloth:
         "kinetic_energy": ("kinetic energy of the cloth", "J"),
         "max_penetration": ("deepest penetration of a cloth vertex into a body", "m"),
         "max_stretch": ("largest relative elongation of a stretch edge", "1"),
+        "over_strain_limit": (
+            "fraction of stretch edges beyond the strain limit, longer than "
+            f"(1 + {1 + LIMIT_SLACK:g} cloth.strain_limit) times their rest length (contacts "
+            "override the limit; it stops after cloth.limit_passes passes)",
+            "1",
+        ),
     }
 
     @classmethod
@@ -585,21 +599,31 @@ class XPBDCloth:
         m = self.tables.constraints.mass
         return 0.5 * float(np.sum(m * np.einsum("ij,ij->i", velocities, velocities)))
 
-    def max_stretch(self, positions) -> float:
-        """Largest relative elongation of a stretch edge (a lattice's warp and weft, every edge
-        of an irregular mesh), |x_i - x_j| / L - 1."""
+    def stretch(self, positions) -> tuple[float, float]:
+        """(largest relative elongation |x_i - x_j| / L - 1 of a stretch edge (a lattice's
+        warp and weft, every edge of an irregular mesh), fraction of the stretch edges longer
+        than the strain limit lets them be, ``(1 + (1 + LIMIT_SLACK) cloth.strain_limit) L``)."""
         c = self.tables.constraints
         if c.n_stretch == 0:
-            return 0.0
+            return 0.0, 0.0
         x = np.ascontiguousarray(positions, np.float64)
-        return float(max_edge_stretch(x, c.edges[: c.n_stretch], c.edge_rest))
+        top, over = edge_stretch(
+            x, c.edges[: c.n_stretch], c.edge_rest, (1.0 + LIMIT_SLACK) * self.settings.strain_limit
+        )
+        return float(top), over / c.n_stretch
+
+    def max_stretch(self, positions) -> float:
+        """The largest relative elongation of a stretch edge (:meth:`stretch`)."""
+        return self.stretch(positions)[0]
 
     def stats(self, state: ClothState) -> dict[str, float]:
         """Figures recorded per step: kinetic energy (J), deepest body penetration (m),
-        largest stretch of a stretch edge (relative)."""
+        largest stretch of a stretch edge and the fraction beyond the strain limit."""
         bodies, boxes, _, _ = self.tables.contacts
+        top, over = self.stretch(state.positions)
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
             "max_penetration": max_penetration(bodies, boxes, state.positions),
-            "max_stretch": self.max_stretch(state.positions),
+            "max_stretch": top,
+            "over_strain_limit": over,
         }
