@@ -24,8 +24,8 @@ velocities. ``velocity()`` returns cell-centred values (the mean of two faces, z
 solid cells), which ``sample()`` interpolates trilinearly like every other backend.
 
 Boundaries (:mod:`.boundaries`): inflow faces take the superposed sources (a uniform
-source only where it blows in, with its inflow ``turbulence`` if it has one:
-:mod:`windbench.wind.fluctuation`); a domain without an outflow face whose inflow carries
+source only where it blows in, with its inflow ``turbulence`` if it has one and its
+``gusts`` envelope: :mod:`windbench.wind.envelope`); a domain without an outflow face whose inflow carries
 a net volume flux turns its inflow faces into openings (pressure zero). The initial
 field is the superposed sources, zero at bodies, projected. Cells whose centre lies in a
 rigid body are solid: every face touching one has zero velocity (the paper's interior
@@ -47,7 +47,7 @@ import numpy as np
 from windbench.errors import ConfigError
 from windbench.geometry.raster import triangle_cells
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.fluctuation import Fluctuation
+from windbench.wind.envelope import SourceTimes
 from windbench.wind.navier_stokes import (
     advection,
     boundaries,
@@ -174,10 +174,9 @@ class NavierStokesWind(WindField):
         self.relaxation = float(params.source_relaxation)
         self.turbulence = str(params.turbulence)
         self.time = 0.0
+        self.times = SourceTimes.build(scene, params.seed)  # gusts and fluctuations
         self.fluctuations = [
-            (s, Fluctuation.build(*s.turbulence, s.velocity, int(params.seed) + i))
-            for i, s in enumerate(scene.sources)
-            if s.turbulence is not None
+            (s, f) for s, f in zip(scene.sources, self.times.fluctuations, strict=True) if f
         ]
         self.body_force = np.asarray(list(params.body_force), dtype=float)
         shape = grid.shape
@@ -259,6 +258,9 @@ class NavierStokesWind(WindField):
         b = face // 2
         n_out = -1.0 if face % 2 == 0 else 1.0
         chosen = [s for s in self.scene.sources if s.kind != "uniform" or s.velocity[b] * n_out < 0]
+        if self.times.gusty:
+            index = [i for i, s in enumerate(self.scene.sources) if s in chosen]
+            return self.times.wind(points, self.time, index)  # gusts: e_i(t) (w_i + u'_i)
         wind = superpose(chosen, points)
         for source, fluctuation in self.fluctuations:
             if source in chosen:
@@ -615,7 +617,7 @@ class NavierStokesWind(WindField):
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
         self.time += dt
-        if self.fluctuations:  # the inflow of this step's end
+        if self.times.varies:  # the inflow of this step's end
             self.planes = self._boundary_planes()
         marked = self._couple(obstacles)
         self._forces(dt)
