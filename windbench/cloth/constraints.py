@@ -287,18 +287,30 @@ def limit_edge(p, inv_mass, i, j, rest, limit, trigger2):
 
 
 @njit(cache=True)
-def limit_edges(p, inv_mass, edges, rest, first, last, limit, moved):
+def limit_edges(p, inv_mass, edges, rest, first, last, limit, moved, stamps):
     """One strain-limit pass edge by edge over ``edges[first:last]`` (:func:`limit_edge`, a
     trigger of ``1 + (1 + LIMIT_SLACK) limit`` as for the chains), in place; the vertices it
-    moves are flagged in ``moved``. Returns how many edges it moved."""
+    moves are flagged in ``moved``. Returns how many edges it moved.
+
+    ``stamps`` = (per vertex, per edge, clock (1,)) int64: an edge remembers the clock of
+    its last test and a vertex the clock of its last move; an edge whose two vertices have
+    not moved since its test still keeps the limit and is not tested again (the same
+    result; an edge stamp of -1 forces the test)."""
     trigger = 1.0 + (1.0 + LIMIT_SLACK) * limit
     trigger2 = trigger * trigger
+    vertex_stamp, edge_stamp, clock = stamps
     projected = 0
     for e in range(first, last):
         i, j = edges[e, 0], edges[e, 1]
+        tested = edge_stamp[e]
+        if tested >= 0 and vertex_stamp[i] < tested and vertex_stamp[j] < tested:
+            continue
+        clock[0] += 1
+        edge_stamp[e] = clock[0]
         if limit_edge(p, inv_mass, i, j, rest[e], limit, trigger2):
             projected += 1
             moved[i] = moved[j] = True
+            vertex_stamp[i] = vertex_stamp[j] = clock[0]
     return projected
 
 

@@ -209,7 +209,8 @@ def _strain_limit(model, frame, p, xp, work, normal):
     where the wind presses it on the body its largest stretch stays above the limit, by as
     much as ``max_stretch`` and ``over_strain_limit`` (:meth:`XPBDCloth.stretch`) record."""
     c, s = model.constraints, model.settings
-    _, lam, chain_work, moved, clear = work
+    _, lam, chain_work, moved, clear, stamps = work
+    stamps[1][:] = -1  # every edge is tested in the first pass
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     ptr = c.chain_ptr[: c.n_lattice_chains + 1]
     for _ in range(s.limit_passes if s.strain_limit > 0.0 else 0):
@@ -226,7 +227,15 @@ def _strain_limit(model, frame, p, xp, work, normal):
             s.strain_limit,
         )
         edges = limit_edges(
-            p, c.inv_mass, c.edges, c.edge_rest, c.n_lattice, c.n_stretch, s.strain_limit, moved
+            p,
+            c.inv_mass,
+            c.edges,
+            c.edge_rest,
+            c.n_lattice,
+            c.n_stretch,
+            s.strain_limit,
+            moved,
+            stamps,
         )
         if solved + edges == 0:  # every thread and edge kept it: nothing moved
             break
@@ -263,7 +272,7 @@ def xpbd_frame(model, frame, x, v, f_ext, inertia, out, work):
     h = frame.dt / s.substeps
     inv_h = 1.0 / h
     p, vv = out
-    xp, lam, chain_work, _, clear = work
+    xp, lam, chain_work, _, clear, _ = work
     xp[:] = x
     vv[:] = v
     normal = np.empty(3)
@@ -531,6 +540,7 @@ class Workspace:
     chain: np.ndarray  # (n_stretch, 5) Thomas algorithm
     moved: np.ndarray  # (n,) bool: vertices the edge-by-edge strain limit moved
     clear: tuple  # contact clearances: probe (n, 3), clearance (n,)
+    stamps: tuple  # the strain limit's clocks (limit_edges): per vertex, per edge, clock (1,)
     frame: FrameConstants | None = None
 
 
@@ -590,6 +600,11 @@ class XPBDCloth:
             np.empty((c.n_stretch, 5)),
             np.zeros(model.n_vertices, dtype=np.bool_),
             (np.zeros((model.n_vertices, 3)), np.zeros(model.n_vertices)),
+            (
+                np.full(model.n_vertices, -1, np.int64),
+                np.full(n_e, -1, np.int64),
+                np.zeros(1, np.int64),
+            ),
         )
 
     def frame_constants(self, dt: float) -> FrameConstants:
@@ -610,7 +625,14 @@ class XPBDCloth:
         w = self.workspace
         inertia = _inertia(self.model, x, added_mass)
         work, energy, finite = xpbd_frame(
-            self.tables, frame, x, v, f, inertia, out, (w.x, w.lam, w.chain, w.moved, w.clear)
+            self.tables,
+            frame,
+            x,
+            v,
+            f,
+            inertia,
+            out,
+            (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps),
         )
         frames = state.frames + 1
         if not finite:
