@@ -101,8 +101,12 @@ class StaticCloth:
     def __init__(self, model: ClothModel, bodies, params):
         self.model = model
 
-    def step(self, state: ClothState, external_forces: np.ndarray, dt: float) -> ClothState:
+    def step(self, state: ClothState, external_forces, dt: float, added_mass=None) -> ClothState:
         return state
+
+    def mobility(self) -> np.ndarray:
+        """A static cloth does not yield to the air: 0 per vertex."""
+        return np.zeros(self.model.n_vertices)
 
     def stats(self, state: ClothState) -> dict[str, float]:
         return {}

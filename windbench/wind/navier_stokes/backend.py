@@ -24,8 +24,8 @@ velocities. ``velocity()`` returns cell-centred values (the mean of two faces, z
 solid cells), which ``sample()`` interpolates trilinearly like every other backend.
 
 Boundaries (:mod:`.boundaries`): inflow faces take the superposed sources (a uniform
-source only where it blows in, with its inflow ``turbulence`` if it has one:
-:mod:`windbench.wind.fluctuation`); a domain without an outflow face whose inflow carries
+source only where it blows in, with its inflow ``turbulence`` if it has one and its
+``gusts`` envelope: :mod:`windbench.wind.envelope`); a domain without an outflow face whose inflow carries
 a net volume flux turns its inflow faces into openings (pressure zero). The initial
 field is the superposed sources, zero at bodies, projected. Cells whose centre lies in a
 rigid body are solid: every face touching one has zero velocity (the paper's interior
@@ -47,7 +47,7 @@ import numpy as np
 from windbench.errors import ConfigError
 from windbench.geometry.raster import triangle_cells
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.fluctuation import Fluctuation
+from windbench.wind.envelope import SourceTimes
 from windbench.wind.navier_stokes import (
     advection,
     boundaries,
@@ -175,10 +175,9 @@ class NavierStokesWind(WindField):
         self.relaxation = float(params.source_relaxation)
         self.turbulence = str(params.turbulence)
         self.time = 0.0
+        self.times = SourceTimes.build(scene, params.seed)  # gusts and fluctuations
         self.fluctuations = [
-            (s, Fluctuation.build(*s.turbulence, s.velocity, int(params.seed) + i))
-            for i, s in enumerate(scene.sources)
-            if s.turbulence is not None
+            (s, f) for s, f in zip(scene.sources, self.times.fluctuations, strict=True) if f
         ]
         self.body_force = np.asarray(list(params.body_force), dtype=float)
         shape = grid.shape
@@ -230,7 +229,9 @@ class NavierStokesWind(WindField):
         self._u_cell = np.zeros((*shape, 3))
         self._cell_valid = False
         self._stats: dict[str, float] = {}
-        self._blocked = None
+        self._blocked = None  # (rows, velocities, weights) of the faces the cloth closes
+        self._pockets = (np.full(shape, -1, np.int64), 0)  # air the cloth encloses
+        self._loads = None  # pressure force / rho on each cloth triangle
         self._initial_condition(scene)
 
     # ------------------------------------------------------------ set-up helpers
@@ -258,6 +259,9 @@ class NavierStokesWind(WindField):
         b = face // 2
         n_out = -1.0 if face % 2 == 0 else 1.0
         chosen = [s for s in self.scene.sources if s.kind != "uniform" or s.velocity[b] * n_out < 0]
+        if self.times.gusty:
+            index = [i for i, s in enumerate(self.scene.sources) if s in chosen]
+            return self.times.wind(points, self.time, index)  # gusts: e_i(t) (w_i + u'_i)
         wind = superpose(chosen, points)
         for source, fluctuation in self.fluctuations:
             if source in chosen:
@@ -328,7 +332,7 @@ class NavierStokesWind(WindField):
             self.q[a].reshape(-1)[self.solid_faces[a]] = 0.0
             boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], set_normal)
         if self._blocked is not None and len(self._blocked[0]):
-            rows, vals = self._blocked
+            rows, vals, _ = self._blocked
             coupling.apply_blocked(rows, vals, *self.q, *self.free)
 
     def _fill(self, arrays):
@@ -508,6 +512,8 @@ class NavierStokesWind(WindField):
     def _project(self):
         face_flux(*self.q, self.target, self.rhs)
         np.negative(self.rhs, out=self.rhs)  # A psi = -(h div u - target)
+        if self._pockets[1]:  # air enclosed by cloth: its right-hand side must sum to 0
+            coupling.balance_pockets(self.rhs, *self._pockets)
         atol = 1e-14 * self.scene.reference_speed * np.sqrt(self.grid.n_cells)
         iters, res = self.poisson.solve(
             self.psi, self.rhs, self.tol, self.max_iterations, atol=atol
@@ -515,13 +521,18 @@ class NavierStokesWind(WindField):
         rhs_norm = self.poisson.rhs_norm  # ||rhs||_2, computed by the solve
         for a in range(3):
             subtract_gradient(self.q[a], a, self.psi, self.free[a], self.periodic)
+        if self._blocked is not None:  # the cloth yields to the pressure jump
+            rows, _, weight = self._blocked
+            coupling.move_membranes(rows, weight, self.psi, self.periodic, *self.q)
+        for a in range(3):
             boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], False)
         self._cell_valid = False
         return iters, res, rhs_norm
 
     def _couple(self, obstacles: Obstacles):
         """Paper §4.1.2 (``paper``/``projection``): act on the air where the cloth is."""
-        self._blocked = None
+        self._blocked, self._loads = None, None
+        self._pockets = (self._pockets[0], 0)
         tris = obstacles.cloth_triangles
         if self.coupling == "none" or tris is None or len(tris) == 0:
             return 0
@@ -544,9 +555,13 @@ class NavierStokesWind(WindField):
             )
         self.q, self.work = self.work, self.q
         if self.coupling == "projection":
-            rows, vals = coupling.blocked_faces(
+            mobility = obstacles.cloth_mobility
+            if mobility is None:
+                mobility = np.zeros(pos.shape[0])
+            rows, vals, weight = coupling.blocked_faces(
                 pos,
                 vel,
+                np.ascontiguousarray(mobility, dtype=np.float64),
                 tris,
                 start,
                 items,
@@ -554,20 +569,52 @@ class NavierStokesWind(WindField):
                 self.h,
                 np.asarray(self.grid.shape, dtype=np.int64),
             )
-            self._blocked = (rows, vals)
+            self._blocked = (rows, vals, weight)
             for a in range(3):
                 self.free[a][...] = self.free_static[a]
         self._apply_boundaries(set_normal=True)
         if self.coupling == "projection":
-            self._set_weights()
+            self._set_membrane_weights(rows, weight)
         return m
+
+    def _set_membrane_weights(self, rows, weight):
+        """The Poisson weights with the cloth's faces (:func:`.coupling.move_membranes`) and
+        the pockets of air that closed faces enclose (:func:`.coupling.pockets`)."""
+        for a in range(3):
+            face_weights(self.free[a], a, self.periodic, self.weights[a])
+        coupling.membrane_weights(rows, weight, *self.weights)
+        self.poisson.set_weights(*self.weights)
+        joined = [f.copy() for f in self.free]
+        coupling.open_membranes(rows, weight, *joined)
+        self._pockets = coupling.pockets(*joined, self.solid, self.periodic)
+
+    def _pressure_loads(self, dt: float, obstacles: Obstacles) -> None:
+        """Pressure force over rho on each cloth triangle
+        (:func:`.coupling.triangle_pressure_loads`): p / rho = psi h / dt for a step whose
+        psi holds dt grad p, twice that when it holds dt/2 grad p (``second_order`` after
+        its first step)."""
+        share = 0.5 if (self.advection == "second_order" and self._pressure_scale == 1.0) else 1
+        self._loads = coupling.triangle_pressure_loads(
+            np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64),
+            np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64),
+            self.psi,
+            self.solid,
+            self.lower,
+            self.h,
+            self.h / (dt * share),
+        )
+
+    def cloth_pressure_loads(self) -> np.ndarray | None:
+        """``projection`` coupling: the pressure force over the air density on each cloth
+        triangle in the last step (m^4 s^-2), else None."""
+        return self._loads
 
     # ------------------------------------------------------------ interface
 
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
         self.time += dt
-        if self.fluctuations:  # the inflow of this step's end
+        if self.times.varies:  # the inflow of this step's end
             self.planes = self._boundary_planes()
         marked = self._couple(obstacles)
         self._forces(dt)
@@ -583,6 +630,8 @@ class NavierStokesWind(WindField):
             sweeps = self._diffuse(dt)
             t3 = time.perf_counter()
         iters, res, rhs_norm = self._project()
+        if self._blocked is not None:
+            self._pressure_loads(dt, obstacles)
         t4 = time.perf_counter()
         peak, squares, count = divergence_norms(*self.q, self.target, self.solid)
         scale = 1.0 / self.scene.reference_speed  # h div u / U_ref
