@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from windbench.cli import compose_config
-from windbench.metrics import unsettled_reason
 from windbench.config import ConfigError
+from windbench.metrics import unsettled_reason
 from windbench.simulate import FLOW_THROUGHS, MIN_WINDOW, WINDOW_FLOW_THROUGHS, prepare
 
 EMPTY = ["scene=empty", "grid.resolution=8", "sim.dt=0.05"]  # 4 m at 6 m/s: T = 2/3 s

@@ -19,7 +19,6 @@ from windbench.grid import Grid
 from windbench.metrics import plane_flux_ratio
 from windbench.scenes import build_scene
 from windbench.wind.base import Obstacles
-from windbench.wind.navier_stokes.turbulence import sources_viscosity
 from windbench.wind.particles import ParticleWind
 from windbench.wind.particles.mixing import (
     _bounce,
@@ -28,6 +27,7 @@ from windbench.wind.particles.mixing import (
     unit_triple,
 )
 from windbench.wind.primitives import superpose
+from windbench.wind.surface_layer import sources_viscosity
 
 MIXING = "wind.lee_model=mixing"
 LOG_WIND = {

@@ -46,6 +46,7 @@ import numpy as np
 
 from windbench.errors import ConfigError
 from windbench.geometry.raster import triangle_cells
+from windbench.wind import surface_layer
 from windbench.wind.base import Obstacles, WindField
 from windbench.wind.envelope import SourceTimes
 from windbench.wind.navier_stokes import (
@@ -75,9 +76,9 @@ from windbench.wind.navier_stokes.projection import (
     max_abs,
     subtract_gradient,
 )
-from windbench.wind.navier_stokes.turbulence import MIXING_LENGTH_LIMIT
 from windbench.wind.primitives import parameter_table, profile_scale, superpose
 from windbench.wind.registry import WindConfig, register_backend
+from windbench.wind.surface_layer import MIXING_LENGTH_LIMIT
 
 ADVECTION = ("semi_lagrangian", "maccormack", "second_order")
 COUPLING = ("none", "paper", "projection")
@@ -412,13 +413,13 @@ class NavierStokesWind(WindField):
 
     def _eddy_viscosity_model(self, limit: float) -> np.ndarray | None:
         """nu_t per cell: fixed for ``mixing_length`` (the undisturbed wind's shear at each
-        layer, :func:`.turbulence.surface_layer_viscosity`), updated every step for
+        layer, :func:`windbench.wind.surface_layer.surface_layer_viscosity`), updated every step for
         ``smagorinsky``, None without turbulence or where the wind has no shear."""
         if self.turbulence == "none":
             return None
         if self.turbulence == "smagorinsky":
             return np.zeros(self.grid.shape)
-        layers = turbulence.sources_viscosity(
+        layers = surface_layer.sources_viscosity(
             self.scene.sources,
             self.grid.axes()[2],
             self.lower,

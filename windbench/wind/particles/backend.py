@@ -47,7 +47,6 @@ from windbench.config import check_settings, setting
 from windbench.geometry.bodies import body_table
 from windbench.geometry.raster import triangle_cell_pairs
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.navier_stokes.turbulence import MIXING_LENGTH_LIMIT
 from windbench.wind.particles import mixing
 from windbench.wind.particles.emission import Emitter, emission_specs, emitters_from_scene
 from windbench.wind.particles.tracing import (
@@ -74,6 +73,7 @@ from windbench.wind.particles.tracing import (
 )
 from windbench.wind.primitives import parameter_table
 from windbench.wind.registry import WindConfig, register_backend
+from windbench.wind.surface_layer import MIXING_LENGTH_LIMIT
 
 CONTACT_OFFSET = 1e-6  # particles rest this many cell widths outside a surface they hit
 SORT_EVERY = 8  # steps between reorderings of the particles by cell (memory locality)

@@ -11,7 +11,7 @@ xi of zero mean and unit variance per axis (uniform on [-sqrt 3, sqrt 3]: bounde
 step never jumps a wall), so a uniform density in the divergence-free w_i stays uniform
 (the well-mixed condition) and a point release spreads with variance 2 K t per axis.
 K(z) = l(z)^2 |dU/dz| is the Navier-Stokes backend's surface-layer K of the sources'
-profile (``turbulence.sources_viscosity``: both models mix alike), plus I |U| L for inflow
+profile (``surface_layer.sources_viscosity``: both models mix alike), plus I |U| L for inflow
 ``turbulence`` (Taylor); below the lowest sheared height K keeps its value there.
 
 Flux kept: at a hit the carried wind a (if it points into the surface) turns along it
@@ -41,7 +41,6 @@ from numba import njit
 
 from windbench.errors import ConfigError
 from windbench.geometry.bodies import BOX
-from windbench.wind.navier_stokes.turbulence import sources_viscosity
 from windbench.wind.particles.emission import emission_specs
 from windbench.wind.particles.tracing import (
     BODIES,
@@ -53,6 +52,7 @@ from windbench.wind.particles.tracing import (
     first_triangle_hit,
 )
 from windbench.wind.primitives import NO_PROFILE, primitive_velocity, profile_factor
+from windbench.wind.surface_layer import sources_viscosity
 
 LEAVE, MIRROR, WRAP = 0, 1, 2  # what a domain face does to a particle that reaches it
 FACE_ACTIONS = {"inflow": LEAVE, "outflow": LEAVE, "slip": MIRROR, "no_slip": MIRROR}
