@@ -135,8 +135,9 @@ def window_table(records) -> pd.DataFrame:
         )
     if not rows:
         return pd.DataFrame()
-    d = pd.DataFrame(rows)
-    return d.groupby("scene", sort=True).agg(["min", "max"]).reset_index()
+    d = pd.DataFrame(rows).groupby("scene", sort=True).agg(["min", "max"])
+    d.columns = [f"{name} {stat}" for name, stat in d.columns]  # one header row
+    return d.reset_index()
 
 
 def _scene_panels(scenes):
@@ -147,9 +148,17 @@ def _scene_panels(scenes):
     return fig, [fig.add_subplot(rows, cols, i + 1) for i in range(len(scenes))]
 
 
-def _band(ax, ref: Reference | None):
-    if ref is not None and np.isfinite(ref.gci):
-        ax.axhspan(0, ref.gci, color="0.85", zorder=0)
+def _band(ax, ref: Reference | None, errors) -> None:
+    """The reference's GCI as a grey band from 0; a band above the panel's errors is cut at
+    1.2x the largest and labelled with its value, so that the points stay readable."""
+    if ref is None or not np.isfinite(ref.gci):
+        return
+    top = 1.2 * float(np.nanmax(errors)) if len(errors) else ref.gci
+    ax.axhspan(0, min(ref.gci, top), color="0.85", zorder=0)
+    if ref.gci > top:
+        ax.set_ylim(0, top)
+        ax.text(0.02, 0.97, f"GCI = {ref.gci:.3g} (off the scale): not converged",
+                transform=ax.transAxes, va="top", fontsize=7)  # fmt: skip
 
 
 def _legend_below(fig, handles_axes):
@@ -171,7 +180,7 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
     markers = dict(zip(sorted(table["resolution"].unique()), RESOLUTION_MARKERS, strict=False))
     for ax, scene in zip(axes, scenes, strict=True):
         sub = table[table["scene"] == scene]
-        _band(ax, refs.get(scene))
+        _band(ax, refs.get(scene), sub["error_max"].to_numpy())
         for _, r in sub.iterrows():
             ax.errorbar(
                 r["wall s per simulated s"],
@@ -214,7 +223,7 @@ def fig_lee_error(df: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missi
     scenes = sorted(d["scene"].unique())
     fig, axes = _scene_panels(scenes)
     for ax, scene in zip(axes, scenes, strict=True):
-        _band(ax, refs.get(scene))
+        _band(ax, refs.get(scene), d.loc[d["scene"] == scene, "lee_error"].to_numpy())
         for backend, g in d[d["scene"] == scene].groupby("backend", sort=True):
             s = g.groupby("resolution")["lee_error"].agg(["mean", "min", "max"])
             ax.errorbar(
