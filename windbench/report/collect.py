@@ -77,6 +77,8 @@ FIGURES: dict[str, tuple[str, str | None]] = {
     "wind_seconds_median": ("median wall time of the wind phase per step, steady window", "s"),
     "seconds_per_simulated_second": ("median wall time per step / dt", "1"),
     "wall_cpu_ratio": ("median over the steps of wall time / process CPU time", "1"),
+    "cpu_seconds_per_simulated_second": ("median process CPU time per step / dt", "1"),
+    "threads": ("numba threads of the run", "1"),
     "load_average_peak": ("larger 1-minute load average of the run's start and end", "1"),
     "contended": ("the run shared its cores: its timings are not its own cost", "1"),
     "analysis_start": ("start of the steady window", "s"),
@@ -261,9 +263,10 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     else:
         figs["divergence_max"] = math.nan
     phases = {}
-    if "step_seconds" in ds and ds.sizes.get("time", 0):
+    n_times = ds.sizes.get("time", 0)
+    later = np.arange(n_times) >= 1 if n_times > 1 else np.ones(n_times, bool)
+    if "step_seconds" in ds and n_times:
         sec = np.asarray(ds["step_seconds"].values, dtype=float)
-        later = np.arange(sec.shape[0]) >= 1 if sec.shape[0] > 1 else np.ones(1, bool)
         steady = sec[later]
         in_window = sec[later & window] if (later & window).any() else steady
         for j, ph in enumerate(ds["phase"].values):
@@ -277,6 +280,8 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     figs["seconds_per_simulated_second"] = figs["seconds_per_step_median"] / float(
         ds.attrs.get("dt", math.nan)
     )
+    figs["cpu_seconds_per_simulated_second"] = _cpu_per_simulated_second(ds, later & window)
+    figs["threads"] = int(ds.attrs.get("numba_threads", 0))
     figs.update(contention(ds))
     shape = ds.attrs.get("grid_shape")
     shape = (
@@ -291,6 +296,16 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     figs["steps_completed"] = int(ds.attrs.get("steps_completed", ds.sizes.get("time", 0)))
     figs["steps_planned"] = int(ds.attrs.get("steps_planned", -1))
     return figs, phases
+
+
+def _cpu_per_simulated_second(ds: xr.Dataset, steps) -> float:
+    """Median process CPU time per step over ``steps`` (the steady window after the first
+    step) / dt: a one-thread run's own cost even when it shared its cores."""
+    if "step_cpu_seconds" not in ds or not ds.sizes.get("time", 0):
+        return math.nan
+    cpu = np.asarray(ds["step_cpu_seconds"].values, dtype=float)
+    chosen = cpu[steps] if np.any(steps) else cpu
+    return float(np.median(chosen)) / float(ds.attrs.get("dt", math.nan))
 
 
 def contention(ds: xr.Dataset) -> dict:

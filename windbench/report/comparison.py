@@ -20,6 +20,8 @@ from windbench.report.figures import Drawn, Missing, _color, _figure, timed
 from windbench.report.lee import Reference
 
 COST_X = "seconds_per_simulated_second"
+CPU_X = "cpu_seconds_per_simulated_second"
+COST_LABEL = "s per simulated s"
 LEE_MODEL = "wind.lee_model"  # the particle backend's lee: paper | mixing
 RESOLUTION_MARKERS = "v<osD*Ph>"  # by rank of the resolutions in a table, coarsest first
 # Relative wind speed behind dense windbreaks (optical porosity < 20 %) at about half
@@ -65,23 +67,34 @@ def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
     return front
 
 
+def own_cost(d: pd.DataFrame, contended: bool = False) -> pd.Series:
+    """Seconds per simulated second that are the run's own: the wall time of a run that had
+    its cores (:func:`~windbench.report.figures.timed`), else the process CPU time of a
+    one-thread run (what it takes on an idle core: it computed while it held one), else
+    NaN (a multi-thread run that shared its cores measured the sharing)."""
+    cost = pd.Series(np.nan, index=d.index)
+    kept = timed(d, contended).index
+    cost[kept] = d.loc[kept, COST_X]
+    if CPU_X in d and "threads" in d:
+        single = cost.isna() & (d["threads"] == 1)
+        cost[single] = d.loc[single, CPU_X]
+    return cost
+
+
 def accuracy_cost_table(df: pd.DataFrame, contended: bool = False) -> pd.DataFrame:
     """Per scene, backend (the particles' lee model told apart) and resolution: cost per
     simulated second and lee error (seeds and time steps: mean, with the seeds' spread),
-    Pareto front marked per scene. The cost is the median over the runs whose timings hold
-    (:func:`~windbench.report.figures.timed`; ``contended`` counts those left out of it,
-    NaN cost where none is left)."""
+    Pareto front marked per scene. The cost is the median of :func:`own_cost` over the
+    runs (``contended`` counts the runs that shared their cores and were timed by CPU)."""
     d = compared(df)
     if d.empty or COST_X not in d:
         return pd.DataFrame()
-    d = d.assign(timed_cost=np.nan)
-    kept = timed(d, contended).index
-    d.loc[kept, "timed_cost"] = d.loc[kept, COST_X]
+    d = d.assign(timed_cost=own_cost(d, contended))
     keys = [k for k in ("scene", "backend", "resolution", "dt") if k in d]
     g = d.groupby(keys, sort=True)
     out = g.agg(
         runs=("lee_error", "size"),
-        contended=("timed_cost", lambda c: int(c.isna().sum())),
+        contended=("contended", lambda c: int(c.fillna(False).astype(bool).sum())),
         cost=("timed_cost", "median"),
         lee_error=("lee_error", "mean"),
         error_min=("lee_error", "min"),
@@ -94,7 +107,7 @@ def accuracy_cost_table(df: pd.DataFrame, contended: bool = False) -> pd.DataFra
         front = np.zeros(len(sub), dtype=bool)
         front[finite] = pareto_front(sub["cost"].values[finite], sub["lee_error"].values[finite])
         out.loc[idx, "pareto"] = front
-    return out.rename(columns={"cost": "wall s per simulated s"})
+    return out.rename(columns={"cost": COST_LABEL})
 
 
 def reference_table(refs: dict[str, Reference]) -> pd.DataFrame:
@@ -171,7 +184,8 @@ def _legend_below(fig, handles_axes):
 
 
 def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missing:
-    """x: wall time per simulated second, y: lee error, one panel per scene; Pareto front."""
+    """x: own time per simulated second (:func:`own_cost`), y: lee error, one panel per
+    scene; Pareto front."""
     title = "Accuracy against cost"
     if table.empty:
         return Missing("accuracy_vs_cost", title, "runs with a lee error and a reference")
@@ -183,7 +197,7 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
         _band(ax, refs.get(scene), sub["error_max"].to_numpy())
         for _, r in sub.iterrows():
             ax.errorbar(
-                r["wall s per simulated s"],
+                r[COST_LABEL],
                 r["lee_error"],
                 yerr=[[r["lee_error"] - r["error_min"]], [r["error_max"] - r["lee_error"]]],
                 fmt=markers.get(r["resolution"], "o"),
@@ -191,12 +205,12 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
                 ms=5,
                 label=r["backend"],
             )
-        front = sub[sub["pareto"]].sort_values("wall s per simulated s")
-        ax.plot(front["wall s per simulated s"], front["lee_error"], "k--", lw=0.8)
+        front = sub[sub["pareto"]].sort_values(COST_LABEL)
+        ax.plot(front[COST_LABEL], front["lee_error"], "k--", lw=0.8)
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(scene, fontsize=9)
-        ax.set_xlabel("wall s per simulated s")
+        ax.set_xlabel(COST_LABEL)
         ax.set_ylabel("lee error / U")
         ax.grid(True, which="both", alpha=0.3)
     for res, marker in markers.items():
@@ -204,8 +218,9 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
     axes[0].plot([], [], "k--", lw=0.8, label="Pareto front")
     _legend_below(fig, axes)
     caption = (
-        "Every backend and resolution as a point: wall time per simulated second (median "
-        "step over the steady window, divided by dt) against the lee error (RMS wind "
+        "Every backend and resolution as a point: its own time per simulated second (median "
+        "step over the steady window, divided by dt: wall time, or for a one-thread run that "
+        "shared its cores its CPU time, see the table's contended column) against the lee error (RMS wind "
         "difference in the lee box against the scene's reference, over U_ref); error bars "
         "span the seeds; the dashed line joins the Pareto front (no point is both cheaper "
         "and more accurate); the grey band is the reference's own uncertainty (GCI): an "
