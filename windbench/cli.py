@@ -55,7 +55,7 @@ def _run_in(cfg: DictConfig, out_dir: Path, multirun: bool, run) -> str:
             write_status(out_dir, "skipped")
             return "skipped"
     try:
-        result = run(cfg, out_dir)
+        result = run(cfg, out_dir, jobs=parallel_jobs() if multirun else 1)
     except ConfigError as err:
         print(f"windbench: error: {err}", file=sys.stderr)
         write_status(out_dir, "invalid", reason=str(err))
@@ -70,6 +70,21 @@ def _run_in(cfg: DictConfig, out_dir: Path, multirun: bool, run) -> str:
     else:
         log.info("wrote %s", result.path)
     return result.status
+
+
+def parallel_jobs() -> int:
+    """Runs the sweep's launcher has in flight at once: joblib's ``n_jobs`` (negative n:
+    the available cores + 1 + n, as joblib counts), 1 for the launchers that run one job
+    per process or machine (basic, submitit)."""
+    from omegaconf import OmegaConf
+
+    from windbench.runtime import available_cores
+
+    n = OmegaConf.select(HydraConfig.get(), "launcher.n_jobs", default=None)
+    if n is None:
+        return 1
+    n = int(n)
+    return max(1, available_cores() + 1 + n if n < 0 else n)
 
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="config")

@@ -106,11 +106,17 @@ class SimConfig:
     spinup: Any = setting(
         "auto", "s", "simulated before recording starts; auto: two flow-through times"
     )
-    duration: float = setting(1.0, "s", "simulated time recorded after the spin-up", gt=0)
+    duration: Any = setting(
+        1.0,
+        "s",
+        "simulated time recorded after the spin-up; auto: one flow-through time, at least 1 s",
+    )
     max_steps: int = setting(
         100_000, "1", "largest step count (sim.duration / sim.dt) accepted", ge=1
     )
-    progress: bool = setting(True, "", "progress bar (only on a terminal)")
+    progress: bool = setting(
+        True, "", "progress bar on a terminal, else a log line every tenth of the run"
+    )
     fail_at_step: int | None = setting(
         None, "1", "fault injection: the run diverges at this step (tests)", ge=1
     )
@@ -214,6 +220,17 @@ class ResumeConfig:
 
 
 @dataclass
+class RuntimeConfig:
+    """How a run uses the machine (windbench.runtime); not part of its numbers."""
+
+    threads: Any = setting(
+        "auto",
+        "1",
+        "numba threads of the run; auto: the cores available / the launcher's parallel runs",
+    )
+
+
+@dataclass
 class WindbenchConfig:
     wind: Any = MISSING
     scene: SceneConfig = MISSING
@@ -224,6 +241,7 @@ class WindbenchConfig:
     output: OutputConfig = field(default_factory=OutputConfig)
     seed: int = setting(0, "1", "random seed (particle emission)", ge=0, le=2**32 - 1)
     resume: ResumeConfig = field(default_factory=ResumeConfig)
+    runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
     experiment: str | None = None
 
 
@@ -298,7 +316,14 @@ def check_values(cfg) -> None:
     for key in cfg:
         if key != "hydra":  # Hydra's own node (when composed with it) is not a run setting
             check_finite(cfg[key], f"{key}.")
-    for key, f in schema_fields():
-        value = OmegaConf.select(cfg, key, default=None)
+    check_settings(cfg, WindbenchConfig)
+
+
+def check_settings(node, schema: type, prefix: str = "") -> None:
+    """ConfigError for the first :func:`setting` of ``schema`` whose value in ``node`` is out
+    of its range; the error names the key as ``prefix`` + its dotted path (a backend checks
+    its ``wind`` node with prefix ``wind.``)."""
+    for key, f in schema_fields(schema, prefix):
+        value = OmegaConf.select(node, key.removeprefix(prefix), default=None)
         if value is not None and not _in_range(value, f.metadata):
             raise ConfigError(key, f"must be {allowed(f.metadata)}, got {value!r}")

@@ -66,6 +66,7 @@ VARIABLES: dict[str, tuple[str, str | None]] = {
     ),
     "lee_force_ratio": ("|F| on the sheltered cloth / |F| on the exposed cloth", "1"),
     "step_seconds": ("wall time per step and phase", "s"),
+    "step_cpu_seconds": ("CPU time of the process per step (all its threads)", "s"),
     "probe_wind": ("wind at the probe lattice points", "m s-1"),
     "probe_wind_mean": ("wind at the probe lattice points, mean over the steady window", "m s-1"),
     "probe_points": ("probe lattice point positions", "m"),
@@ -89,15 +90,21 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-def runtime_info() -> dict[str, object]:
+def runtime_info(load_average: Mapping[str, list[float]] | None = None) -> dict[str, object]:
     """Where the timings (``step_seconds``) were taken: numba's thread count for the
-    parallel kernels, the machine's cores and platform."""
+    parallel kernels, the machine's cores (and those the process could use), its platform
+    and its load average (1, 5, 15 min) when the run started and ended."""
     import numba
 
+    from windbench.runtime import available_cores
+
+    loads = {f"load_average_{k}": [float(x) for x in v] for k, v in (load_average or {}).items()}
     return {
         "numba_threads": int(numba.get_num_threads()),
         "cpu_count": int(os.cpu_count() or 0),
+        "cores_available": available_cores(),
         "platform": platform.platform(),
+        **loads,
     }
 
 
@@ -185,6 +192,7 @@ def run_dataset(setup: RunSetup, rec: Recorder, status: str, failure: str = "") 
     ds = _probes(ds, setup, rec)
     ds = _frames(ds, setup, rec)
     ds.attrs.update(_run_attrs(setup, status, failure, n))
+    ds.attrs.update(runtime_info(rec.load_average))
     return annotate(ds, rec.units)
 
 
@@ -273,7 +281,7 @@ def _run_attrs(setup: RunSetup, status: str, failure: str, n: int) -> dict:
         scene=setup.scene.name,
         resolution=int(cfg.grid.resolution),
         dt=setup.dt,
-        duration=float(cfg.sim.duration),
+        duration=setup.n_steps * setup.dt,
         spinup=setup.start_time,
         flow_through_time=setup.flow_through_time,
         analysis_start=setup.analysis_start,
@@ -290,7 +298,6 @@ def _run_attrs(setup: RunSetup, status: str, failure: str, n: int) -> dict:
         steps_planned=setup.n_steps,
         git_commit=git_commit(),
         **package_versions(),
-        **runtime_info(),
     )
 
 

@@ -22,7 +22,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm.auto import tqdm
 
-from windbench import metrics
+from windbench import metrics, runtime
 from windbench.aero import AeroParams, aerodynamic_forces, pressure_forces
 from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
@@ -93,21 +93,17 @@ def prepare(cfg: DictConfig) -> RunSetup:
     scales with a user number is estimated (:func:`memory_plan`) before it is made.
     """
     check_values(cfg)
-    dt, duration = float(cfg.sim.dt), float(cfg.sim.duration)
-    _require(duration >= dt, "sim.duration", f"must be at least sim.dt = {dt} s, got {duration}")
-    n_steps = int(round(duration / dt))
-    _require(
-        n_steps <= cfg.sim.max_steps,
-        "sim.dt",
-        f"{dt} s over sim.duration = {duration} s is {n_steps} steps, more than "
-        f"sim.max_steps = {cfg.sim.max_steps}; raise sim.max_steps to run that many",
-    )
+    dt = float(cfg.sim.dt)
+    for key in ("duration", "spinup"):  # a bad number is refused before any mesh is built
+        _seconds(cfg.sim[key], f"sim.{key}", math.nan)
     check_filename(str(cfg.output.filename))
+    runtime.thread_count(cfg.runtime.threads)  # a bad runtime.threads: refused now
     backend = backend_class(cfg.wind.name)  # unknown backend: error listing the allowed ones
     _check_cloth_specs(cfg.scene)  # before the meshes are built
     scene = build_scene(cfg.scene)
+    n_steps = _recorded_steps(cfg.sim, scene)
     grid = Grid.from_domain(scene.lower, scene.upper, int(cfg.grid.resolution))  # no arrays yet
-    spinup_steps = int(round(_spinup(cfg.sim.spinup, scene) / dt))
+    spinup_steps = int(round(_seconds(cfg.sim.spinup, "sim.spinup", _auto_spinup(scene)) / dt))
     _require(
         spinup_steps + n_steps <= cfg.sim.max_steps,
         "sim.spinup",
@@ -177,22 +173,58 @@ def analysis_window(scene: Scene, start: float, end: float) -> tuple[float, floa
     return flow_through, max(start, FLOW_THROUGHS * flow_through)
 
 
-def _spinup(value, scene: Scene) -> float:
-    """``sim.spinup`` in seconds: ``auto`` is FLOW_THROUGHS flow-through times (0 for a
-    scene without flow through), so that recording starts with a developed wind."""
+WINDOW_FLOW_THROUGHS = 1.0  # sim.duration=auto records this many flow-through times,
+MIN_WINDOW = 1.0  # s, and at least this long (a scene without flow through: this long)
+
+
+def _auto_spinup(scene: Scene) -> float:
+    """``sim.spinup=auto``: FLOW_THROUGHS flow-through times (0 for a scene without flow
+    through), so that recording starts with a developed wind."""
+    flow_through = flow_through_time(scene)
+    return FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+
+
+def _auto_duration(scene: Scene) -> float:
+    """``sim.duration=auto``: the steady window spans WINDOW_FLOW_THROUGHS flow-through
+    times, at least MIN_WINDOW. A time mean over a separated wake needs several of its
+    shedding periods (about H / (0.2 U) behind an obstacle of height H); one flow-through
+    time of a domain that reaches several H behind the obstacle holds them."""
+    flow_through = flow_through_time(scene)
+    window = WINDOW_FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+    return max(window, MIN_WINDOW)
+
+
+def _seconds(value, key: str, auto: float) -> float:
+    """``value`` of ``key`` in seconds: ``auto`` becomes ``auto``; anything else must be a
+    finite number >= 0 (a duration > 0)."""
     if str(value) == "auto":
-        flow_through = flow_through_time(scene)
-        return FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+        return auto
     try:
         seconds = float(value)
     except (TypeError, ValueError):
         seconds = math.nan
+    positive = key == "sim.duration"
     _require(
-        np.isfinite(seconds) and seconds >= 0,
-        "sim.spinup",
-        f"must be 'auto' or a number of seconds >= 0, got {value!r}",
+        np.isfinite(seconds) and (seconds > 0 if positive else seconds >= 0),
+        key,
+        f"must be 'auto' or a number of seconds {'>' if positive else '>='} 0, got {value!r}",
     )
     return seconds
+
+
+def _recorded_steps(sim, scene: Scene) -> int:
+    """Steps recorded after the spin-up: ``sim.duration / sim.dt``, at most ``sim.max_steps``."""
+    dt = float(sim.dt)
+    duration = _seconds(sim.duration, "sim.duration", _auto_duration(scene))
+    _require(duration >= dt, "sim.duration", f"must be at least sim.dt = {dt} s, got {duration}")
+    n_steps = int(round(duration / dt))
+    _require(
+        n_steps <= sim.max_steps,
+        "sim.dt",
+        f"{dt} s over sim.duration = {duration:.6g} s is {n_steps} steps, more than "
+        f"sim.max_steps = {sim.max_steps}; raise sim.max_steps to run that many",
+    )
+    return n_steps
 
 
 def _wake_reference(scene: Scene):
@@ -390,6 +422,7 @@ class Recorder:
         self.probe_count = 0
         self.frame_times: list[float] = []
         self.frame_data: dict[str, list[np.ndarray]] = {}
+        self.load_average: dict[str, list[float]] = {}  # "start"/"end": 1, 5, 15 min
 
     def add(self, name: str, value):
         self.rows.setdefault(name, []).append(value)
@@ -445,7 +478,7 @@ class Simulation:
         s = self.setup
         if s.cfg.sim.fail_at_step is not None and n + 1 >= s.cfg.sim.fail_at_step:
             raise SimulationDiverged(n + 1, "fault injected by sim.fail_at_step (testing)")
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         self.wind.step(s.dt, self.obstacles())
         t1 = time.perf_counter()
         vertex_wind = (
@@ -460,18 +493,19 @@ class Simulation:
             )
         t2 = time.perf_counter()
         self.state = self.cloth_solver.step(self.state, vert_f, s.dt)
-        t3 = time.perf_counter()
+        t3, c3 = time.perf_counter(), time.process_time()
         if n < s.spinup_steps:  # spin-up: the wind develops, nothing is recorded
             self._check_finite(n, self.wind.velocity())
             return
-        self._record(n, tri_f, (t1 - t0, t2 - t1, t3 - t2, t3 - t0))
+        self._record(n, tri_f, (t1 - t0, t2 - t1, t3 - t2, t3 - t0), c3 - c0)
 
-    def _record(self, n: int, tri_f, seconds):
+    def _record(self, n: int, tri_f, seconds, cpu_seconds: float):
         s, rec = self.setup, self.recorder
         u = self.wind.velocity()
         self._check_finite(n, u)
         rec.times.append((n + 1) * s.dt)
         rec.add("step_seconds", seconds)
+        rec.add("step_cpu_seconds", cpu_seconds)
         forces = s.cloth.per_cloth_sum(tri_f)
         rec.add("aero_force", forces)
         rec.add("cloth_position", self.state.positions.copy())
@@ -526,15 +560,20 @@ class Simulation:
             raise SimulationDiverged(n + 1, "cloth positions are not finite (NaN or inf)")
 
     def run(self, progress: bool = True) -> Recorder:
+        """All steps, spin-up included; ``progress``: a bar on a terminal, else a log
+        line every tenth of the run (:class:`windbench.runtime.ProgressLog`)."""
+        total = self.setup.spinup_steps + self.setup.n_steps
+        label = f"{self.setup.scene.name}/{self.wind.name}"
+        terminal = sys.stderr.isatty()
         bar = tqdm(
-            range(self.setup.spinup_steps + self.setup.n_steps),
-            desc=f"{self.setup.scene.name}/{self.wind.name}",
-            unit="step",
-            disable=not (progress and sys.stderr.isatty()),
+            range(total), desc=label, unit="step", disable=not (progress and terminal),
             mininterval=1.0,
-        )
+        )  # fmt: skip
+        lines = runtime.ProgressLog(label, total) if progress and not terminal else None
         for n in bar:
             self.step(n)
+            if lines is not None:
+                lines.update(n + 1)
         return self.recorder
 
 
@@ -545,22 +584,29 @@ class RunResult:
     failure: str = ""
 
 
-def run(cfg: DictConfig, out_dir: Path) -> RunResult:
+def run(cfg: DictConfig, out_dir: Path, jobs: int = 1) -> RunResult:
     """Check, simulate and write ``out_dir/windbench.nc`` (status complete or failed).
 
-    A ConfigError is raised before anything is written. A blow-up or any other exception
-    during the loop writes what was recorded with ``status = failed`` and the reason.
+    A ConfigError is raised before anything is written. The run's kernels use
+    ``runtime.threads`` threads, ``auto`` sharing the cores with the ``jobs`` runs a
+    launcher has in flight (:func:`windbench.runtime.thread_count`). A blow-up or any
+    other exception during the loop writes what was recorded with ``status = failed`` and
+    the reason.
     """
+    runtime.use_threads(runtime.thread_count(cfg.runtime.threads, jobs))  # before any kernel
     setup = prepare(cfg)
     path = Path(out_dir) / cfg.output.filename
     git_commit()  # the code as loaded now, before the loop (cached)
     recorder = Recorder(setup)
+    recorder.load_average["start"] = runtime.load_average()
     try:
         Simulation(setup, recorder).run(progress=bool(cfg.sim.progress))
     except Exception as err:  # noqa: BLE001 - recorded, then reported by the caller
         reason = str(err) if isinstance(err, SimulationDiverged) else f"{type(err).__name__}: {err}"
         log.error("run failed: %s", reason)
+        recorder.load_average["end"] = runtime.load_average()
         write_atomic(run_dataset(setup, recorder, "failed", reason), path)
         return RunResult(path, "failed", reason)
+    recorder.load_average["end"] = runtime.load_average()
     write_atomic(run_dataset(setup, recorder, "complete"), path)
     return RunResult(path, "complete")

@@ -5,7 +5,8 @@ Every run leaves ``run_status.yaml`` beside its dataset (written atomically) say
 a complete dataset with the same resolved config and code was already there). At the end
 of a multirun, :class:`SweepSummary` (a Hydra callback, see ``conf/config.yaml``) counts
 them, prints one line, whatever launcher ran the jobs (basic, joblib, submitit), and sets
-the exit status (:func:`exit_status`).
+the exit status (:func:`exit_status`); after each run it prints how many of the sweep's
+runs are done and how many failed (:func:`progress_line`).
 
 One writer per run folder: a run (and a whole sweep, on its sweep folder) holds
 :class:`FolderLock`, a lock file created atomically with the writer's PID and host. A
@@ -33,10 +34,12 @@ from windbench.errors import DatasetUnreadable, FolderBusy
 
 log = logging.getLogger("windbench")
 STATUS_FILE = "run_status.yaml"
+SWEEP_FILE = ".windbench_sweep.yaml"  # the sweep's planned run count and start time
+FAILURES = ("failed", "invalid", "unreadable")
 LOCK_FILE = ".windbench.lock"
 STATUSES = ("complete", "failed", "invalid", "skipped")
 # keys that do not change a run's numbers: ignored when deciding whether to resume
-NON_SEMANTIC = ("resume", "sim.progress", "sim.max_steps")
+NON_SEMANTIC = ("resume", "runtime", "sim.progress", "sim.max_steps")
 exit_code = 0  # of the last multirun in this process (set by SweepSummary)
 
 
@@ -197,9 +200,13 @@ def remove_temporaries(folder: Path, owner: str) -> int:
 
 
 # ------------------------------------------------------------------------ summary
-def count_statuses(sweep_dir: Path) -> Counter:
+def count_statuses(sweep_dir: Path, since: float | None = None) -> Counter:
+    """Runs per status under ``sweep_dir``; with ``since`` (a time.time()), only the
+    status files written since then (the runs of this sweep, not of an earlier one)."""
     counts: Counter = Counter()
     for status_file in Path(sweep_dir).rglob(STATUS_FILE):
+        if since is not None and status_file.stat().st_mtime < since:
+            continue
         try:
             counts[yaml.safe_load(status_file.read_text())["status"]] += 1
         except (OSError, yaml.YAMLError, KeyError, TypeError):
@@ -221,9 +228,58 @@ def summary_line(counts: Counter, sweep_dir) -> str:
     return f"windbench sweep: {', '.join(parts)} ({sweep_dir})"
 
 
+def planned_runs(config: DictConfig) -> int | None:
+    """How many runs the sweep of ``config`` launches, as Hydra's basic sweeper (which the
+    basic and joblib launchers use) expands its ``params`` and the command line's sweeps;
+    None where it cannot be told (another sweeper, a glob)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    params = OmegaConf.select(config, "hydra.sweeper.params", default=None) or {}
+    args = [f"{k}={v}" for k, v in params.items()]
+    args += list(OmegaConf.select(config, "hydra.overrides.task", default=None) or [])
+    try:
+        overrides = OverridesParser.create().parse_overrides(args)
+        return sum(len(batch) for batch in BasicSweeper.split_arguments(overrides, None))
+    except Exception:  # noqa: BLE001 - a sweep this count does not know: no total
+        return None
+
+
+def progress_line(sweep_dir: Path) -> str:
+    """``windbench sweep: 3/12 runs done (1 failed)``: the runs of the sweep in progress
+    in ``sweep_dir`` (started as :data:`SWEEP_FILE` says) that have a status."""
+    try:
+        plan = yaml.safe_load((Path(sweep_dir) / SWEEP_FILE).read_text()) or {}
+    except (OSError, yaml.YAMLError):
+        plan = {}
+    counts = count_statuses(sweep_dir, since=plan.get("started"))
+    total = plan.get("runs")
+    failed = sum(counts.get(s, 0) for s in FAILURES)
+    done = f"{sum(counts.values())}/{total if total is not None else '?'}"
+    return f"windbench sweep: {done} runs done ({failed} failed)"
+
+
 class SweepSummary(Callback):
-    """Prints the one-line count of a sweep's outcomes when the multirun ends and sets the
-    process's exit status (``windbench.sweep.exit_code``, read by ``windbench.cli``)."""
+    """After each run of a multirun, the count of its runs done and failed (on every
+    launcher: the count is read from the status files); when it ends, the one-line count
+    of its outcomes, and the process's exit status (``windbench.sweep.exit_code``, read by
+    ``windbench.cli``)."""
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        sweep_dir = Path(config.hydra.sweep.dir)
+        sweep_dir.mkdir(parents=True, exist_ok=True)
+        plan = {"runs": planned_runs(config), "started": time.time()}
+        tmp = _temporary_name(sweep_dir / SWEEP_FILE)
+        tmp.write_text(yaml.safe_dump(plan))
+        os.replace(tmp, sweep_dir / SWEEP_FILE)
+
+    def on_job_end(self, config: DictConfig, job_return: Any, **kwargs: Any) -> None:
+        from hydra.types import RunMode
+
+        if OmegaConf.select(config, "hydra.mode", default=None) != RunMode.MULTIRUN:
+            return
+        line = progress_line(Path(config.hydra.sweep.dir))
+        log.info(line)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         global exit_code

@@ -6,15 +6,22 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import xarray as xr
 from omegaconf import OmegaConf
 
 from windbench.aero import AeroParams
 from windbench.cli import compose_config
-from windbench.report.collect import RunRecord, flatten, swept_keys
+from windbench.report.collect import RunRecord, contention, flatten, swept_keys
 from windbench.report.comparison import pareto_front
-from windbench.report.figures import fit_exponent, hoerner_long_plate, plate_table, tagging_field
+from windbench.report.figures import (
+    cost_exponents,
+    fit_exponent,
+    hoerner_long_plate,
+    plate_table,
+    tagging_field,
+)
 from windbench.report.lee import assign_lee_errors, choose_references, lee_error
 
 
@@ -122,6 +129,49 @@ def test_fit_exponent_recovers_a_power_law():
     cells = np.array([1e3, 8e3, 64e3, 512e3])
     assert fit_exponent(cells, 3e-7 * cells**1.37) == pytest.approx(1.37, rel=1e-12)
     assert math.isnan(fit_exponent([1000, 1000], [1.0, 2.0]))
+
+
+def _timed_run(wall, cpu, load=(0.1, 0.3), cores=2) -> xr.Dataset:
+    n = len(wall)
+    seconds = np.zeros((n, 4))
+    seconds[:, 3] = wall
+    ds = xr.Dataset(
+        {"step_seconds": (("time", "phase"), seconds), "step_cpu_seconds": ("time", cpu)},
+        coords={"phase": ["wind", "aero", "cloth", "total"]},
+    )
+    ds.attrs.update(cpu_count=cores, load_average_start=[load[0], 0, 0])
+    ds.attrs["load_average_end"] = [load[1], 0, 0]
+    return ds
+
+
+def test_a_run_that_waited_for_a_core_or_shared_a_loaded_machine_is_contended():
+    # the first step (compile) is left out; then wall/CPU = 1 (two threads: 0.5) and 2
+    own = contention(_timed_run([9.0, 1.0, 1.0, 1.0], [1.0, 1.0, 1.0, 1.0]))
+    assert own == {"wall_cpu_ratio": 1.0, "load_average_peak": 0.3, "contended": False}
+    assert not contention(_timed_run([1.0, 0.5, 0.5], [1.0, 1.0, 1.0]))["contended"]
+    assert contention(_timed_run([1.0, 2.0, 2.0], [1.0, 1.0, 1.0]))["contended"]
+    assert contention(_timed_run([1.0] * 3, [1.0] * 3, load=(2.4, 2.6)))["contended"]
+    assert not contention(_timed_run([1.0] * 3, [1.0] * 3, load=(2.4, 2.5)))["contended"]
+
+
+def test_the_cost_fit_leaves_out_contended_runs_and_counts_them():
+    cells = np.array([1e3, 8e3, 64e3, 512e3, 512e3])
+    seconds = 1e-6 * cells**1.2
+    seconds[-1] *= 7.0  # measured while another process held a core
+    df = pd.DataFrame(
+        {
+            "wind": "navier_stokes",
+            "scene": "fence",
+            "grid_cells": cells,
+            "wind_seconds_median": seconds,
+            "contended": [False, False, False, False, True],
+        }
+    )
+    row = cost_exponents(df).iloc[0]
+    assert row["exponent p"] == pytest.approx(1.2, rel=1e-12)
+    assert row["runs"] == 4 and row["left out (contended)"] == 1
+    kept = cost_exponents(df, contended=True).iloc[0]
+    assert kept["runs"] == 5 and kept["exponent p"] > 1.25
 
 
 def test_hoerner_long_plate_and_the_model_at_normal_incidence():

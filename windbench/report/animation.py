@@ -71,65 +71,65 @@ class SceneAnimation:
 
     def __init__(self, cols: list[Column]):
         self.cols = cols
-        with_cloth = cols[0].frames.triangles.size > 0
+        self.with_cloth = cols[0].frames.triangles.size > 0
         with xr.open_dataset(cols[0].record.path) as ds:
             self.scene = F.scene_of(ds)
         self.direction = wind_direction(self.scene)
         self.times = min((c.frames.times for c in cols), key=len)
         n = len(cols)
-        height = 6.0 if with_cloth else 3.4
+        height = 6.0 if self.with_cloth else 3.4
         fig = Figure(figsize=(3.6 * n + 1.2, height), dpi=DPI, layout="constrained")
         self.fig = fig
-        rows = 2 if with_cloth else 1
-        grid = fig.add_gridspec(rows, n, height_ratios=[1.2, 1.0] if with_cloth else [1.0])
+        self.rows = 2 if self.with_cloth else 1
+        ratios = [1.2, 1.0] if self.with_cloth else [1.0]
+        self.grid = fig.add_gridspec(self.rows, n, height_ratios=ratios)
         self.p_norm = Normalize(0.0, F._shared_max([c.frames.pressure for c in cols]))
         self.u_norm = Normalize(0.0, F._shared_max([c.frames.speed for c in cols], 99.5))
         self.polys, self.images, self.overlays, self.dots = [], [], [], []
-        positions = [c.frames.positions for c in cols]
-        lo, hi = F._view_box(self.scene, positions, margin=0.15)
-        slice_axes, cloth_axes = [], []
-        for j, col in enumerate(cols):
-            fr = col.frames
-            if with_cloth:
-                ax = fig.add_subplot(grid[0, j], projection="3d")
-                F._draw_bodies_3d(ax, self.scene, lo, hi)
-                self.polys.append(
-                    F._pressure_cloth_3d(
-                        ax, fr.positions[0], fr.triangles, fr.pressure[0], self.p_norm
-                    )
-                )
-                F._frame_3d(ax, lo, hi, zoom=1.15)
-                ax.set_title(f"{col.wind} (resolution {col.record.settings['resolution']})")
-                cloth_axes.append(ax)
-            ax2 = fig.add_subplot(grid[rows - 1, j])
-            self.images.append(
-                ax2.imshow(
-                    fr.speed[0].T,
-                    origin="lower",
-                    extent=fr.extent,
-                    norm=self.u_norm,
-                    cmap=F.SPEED_CMAP,
-                    interpolation="nearest",
-                )
-            )
-            self.overlays.append(
-                ax2.imshow(
-                    F._not_arrived(fr, 0, self.direction),
-                    origin="lower",
-                    extent=fr.extent,
-                    interpolation="nearest",
-                )
-            )
-            F._draw_bodies_xy(ax2, self.scene, fr.slice_z)
-            (dots,) = ax2.plot([], [], ".", color="tab:red", ms=1.0)
-            self.dots.append(dots)
-            ax2.set_aspect("equal")
-            ax2.set_xlabel("x (m)")
-            ax2.set_ylabel("y (m)")
-            if not with_cloth:
-                ax2.set_title(col.wind)
-            slice_axes.append(ax2)
-        if with_cloth:
+        self.view = F._view_box(self.scene, [c.frames.positions for c in cols], margin=0.15)
+        cloth_axes = [self._cloth_panel(j, c) for j, c in enumerate(cols) if self.with_cloth]
+        slice_axes = [self._slice_panel(j, c) for j, c in enumerate(cols)]
+        self._colorbars_and_key(cloth_axes, slice_axes)
+        self.title = fig.suptitle(" ")
+        self.canvas = FigureCanvasAgg(fig)
+        self.update(0)
+        self.canvas.draw()
+        fig.set_layout_engine("none")  # frozen: the panels do not move between frames
+
+    def _cloth_panel(self, j: int, col: Column):
+        """Top row: the cloth in 3D coloured by |F|/A, with the scene's bodies."""
+        fr = col.frames
+        lo, hi = self.view
+        ax = self.fig.add_subplot(self.grid[0, j], projection="3d")
+        F._draw_bodies_3d(ax, self.scene, lo, hi)
+        self.polys.append(
+            F._pressure_cloth_3d(ax, fr.positions[0], fr.triangles, fr.pressure[0], self.p_norm)
+        )
+        F._frame_3d(ax, lo, hi, zoom=1.15)
+        ax.set_title(f"{col.wind} (resolution {col.record.settings['resolution']})")
+        return ax
+
+    def _slice_panel(self, j: int, col: Column):
+        """Bottom row: |u| in the horizontal slice, grey where particles have not arrived."""
+        fr = col.frames
+        ax = self.fig.add_subplot(self.grid[self.rows - 1, j])
+        style = dict(origin="lower", extent=fr.extent, interpolation="nearest")
+        speed = ax.imshow(fr.speed[0].T, norm=self.u_norm, cmap=F.SPEED_CMAP, **style)
+        self.images.append(speed)
+        self.overlays.append(ax.imshow(F._not_arrived(fr, 0, self.direction), **style))
+        F._draw_bodies_xy(ax, self.scene, fr.slice_z)
+        (dots,) = ax.plot([], [], ".", color="tab:red", ms=1.0)
+        self.dots.append(dots)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        if not self.with_cloth:
+            ax.set_title(col.wind)
+        return ax
+
+    def _colorbars_and_key(self, cloth_axes: list, slice_axes: list) -> None:
+        fig = self.fig
+        if cloth_axes:
             fig.colorbar(
                 F._mappable(self.p_norm, F.PRESSURE_CMAP),
                 ax=cloth_axes,
@@ -141,22 +141,18 @@ class SceneAnimation:
         fig.colorbar(
             F._mappable(self.u_norm, F.SPEED_CMAP),
             ax=slice_axes,
-            label=f"|u| at z = {cols[0].frames.slice_z:.3g} m (m/s)",
+            label=f"|u| at z = {self.cols[0].frames.slice_z:.3g} m (m/s)",
             shrink=0.8,
             extend="max",
         )
+        particles = any(c.frames.reached is not None for c in self.cols)
         fig.legend(
-            handles=_key(any(c.frames.reached is not None for c in cols), with_cloth),
+            handles=_key(particles, self.with_cloth),
             loc="outside lower center",
             ncol=3,
             fontsize=8,
             frameon=False,
         )
-        self.title = fig.suptitle(" ")
-        self.canvas = FigureCanvasAgg(fig)
-        self.update(0)
-        self.canvas.draw()
-        fig.set_layout_engine("none")  # frozen: the panels do not move between frames
 
     def update(self, k: int) -> None:
         t = float(self.times[k])

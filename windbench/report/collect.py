@@ -27,7 +27,8 @@ excluded: it holds numba's compile or cache load), ``seconds_per_step_median`` a
 ``wind_seconds_median`` (medians over the window, robust to other processes),
 ``seconds_per_simulated_second`` (median step / dt); the lee probe wind averaged over the
 window (``probe_wind_mean``, for :mod:`windbench.report.lee`) and the window-mean wake
-profile u/u0 (``wake_speed_ratio``).
+profile u/u0 (``wake_speed_ratio``). A run whose timings were taken while it shared its
+cores is ``contended`` (:func:`contention`); the cost fits leave it out.
 """
 
 from __future__ import annotations
@@ -63,6 +64,11 @@ SETTINGS = {
 IGNORED = ("scene.", "output.", "hydra.", "sim.progress", "resume", "experiment")
 REQUIRED = ("wind", "step_seconds", "cloth_position", "divergence_rms")
 AVERAGED = ("lee_speed_ratio", "lee_force_ratio", "divergence_rms")
+# Contention: a step whose wall time exceeds its process's CPU time by this factor waited
+# for a core; a load average above the machine's cores by this margin had more runnable
+# threads than cores (the run's own threads are at most the cores).
+WALL_CPU_LIMIT = 1.2
+LOAD_MARGIN = 0.5
 # long_name and units of what combine() writes besides the run variables' time means (a
 # run variable's own long_name and units come from the run datasets); units None: a label
 FIGURES: dict[str, tuple[str, str | None]] = {
@@ -70,6 +76,9 @@ FIGURES: dict[str, tuple[str, str | None]] = {
     "seconds_per_step_median": ("median wall time per step over the steady window", "s"),
     "wind_seconds_median": ("median wall time of the wind phase per step, steady window", "s"),
     "seconds_per_simulated_second": ("median wall time per step / dt", "1"),
+    "wall_cpu_ratio": ("median over the steps of wall time / process CPU time", "1"),
+    "load_average_peak": ("larger 1-minute load average of the run's start and end", "1"),
+    "contended": ("the run shared its cores: its timings are not its own cost", "1"),
     "analysis_start": ("start of the steady window", "s"),
     "flow_through_time": ("domain length along the wind / reference speed", "s"),
     "spinup": ("simulated time before recording", "s"),
@@ -268,6 +277,7 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     figs["seconds_per_simulated_second"] = figs["seconds_per_step_median"] / float(
         ds.attrs.get("dt", math.nan)
     )
+    figs.update(contention(ds))
     shape = ds.attrs.get("grid_shape")
     shape = (
         [int(v) for v in np.atleast_1d(shape)] if shape is not None else list(ds["wind"].shape[1:4])
@@ -281,6 +291,25 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     figs["steps_completed"] = int(ds.attrs.get("steps_completed", ds.sizes.get("time", 0)))
     figs["steps_planned"] = int(ds.attrs.get("steps_planned", -1))
     return figs, phases
+
+
+def contention(ds: xr.Dataset) -> dict:
+    """``wall_cpu_ratio`` (median over the steps after the first of wall / CPU time),
+    ``load_average_peak`` (the larger 1-minute load average at start and end) and
+    ``contended``: the ratio above WALL_CPU_LIMIT (the process waited for a core) or the
+    load above the machine's cores + LOAD_MARGIN (more runnable threads than cores).
+    Datasets without CPU time or load (older ones) are not flagged."""
+    ratio = math.nan
+    if "step_cpu_seconds" in ds and "step_seconds" in ds and ds.sizes.get("time", 0) > 1:
+        wall = np.asarray(ds["step_seconds"].sel(phase="total").values, dtype=float)[1:]
+        cpu = np.asarray(ds["step_cpu_seconds"].values, dtype=float)[1:]
+        ok = cpu > 0
+        ratio = float(np.median(wall[ok] / cpu[ok])) if ok.any() else math.nan
+    loads = [np.atleast_1d(ds.attrs[k])[0] for k in ds.attrs if k.startswith("load_average_")]
+    peak = float(max(loads)) if loads else math.nan
+    cores = float(ds.attrs.get("cpu_count", math.nan))
+    contended = bool(ratio > WALL_CPU_LIMIT or peak > cores + LOAD_MARGIN)
+    return {"wall_cpu_ratio": ratio, "load_average_peak": peak, "contended": contended}
 
 
 def _probes(ds: xr.Dataset, rec: RunRecord):
@@ -466,14 +495,20 @@ def _setting(rec: RunRecord, name: str):
 def swept_keys(records: Sequence[RunRecord]) -> list[str]:
     """The dimensions: :data:`SETTINGS`, then every other config key that all complete runs
     have and that takes more than one value among them (e.g. ``aero.lift_coefficient``).
-    A ``scene.*`` key counts only if it varies among runs of one scene (e.g. a swept
-    ``scene.cloths.0.resolution``): otherwise it follows from the scene's name."""
+    A ``wind.*`` key of one backend (e.g. the particles' ``wind.lee_model``) counts when it
+    takes more than one value among the runs that have it. A ``scene.*`` key counts only
+    if it varies among runs of one scene (e.g. a swept ``scene.cloths.0.resolution``):
+    otherwise it follows from the scene's name."""
     complete = [r for r in records if r.status in ("complete", "duplicate")]
     extra = []
     if complete:
         common = set(complete[0].config)
         for r in complete[1:]:
             common &= set(r.config)
+        backend_keys = {k for r in complete for k in r.config if k.startswith("wind.")} - common
+        for key in sorted(backend_keys):
+            if len({repr(r.config[key]) for r in complete if key in r.config}) > 1:
+                extra.append(key)
         for key in sorted(common):
             if key in SETTINGS.values() or key in IGNORED:
                 continue
@@ -512,6 +547,17 @@ def summary_frame(records: Sequence[RunRecord]) -> pd.DataFrame:
     return df[[c for c in front if c in df] + [c for c in df if c not in front]]
 
 
+def _netcdf_dims(df: pd.DataFrame, dims: Sequence[str]) -> None:
+    """Dimension columns as netCDF can hold them, in place: tuples (list-valued settings)
+    as text, and a backend's key that other backends' runs lack (None, NaN) as "" when its
+    values are text (e.g. ``wind.lee_model`` of a navier_stokes run)."""
+    for c in dims:
+        if df[c].map(lambda v: isinstance(v, tuple)).any():
+            df[c] = df[c].map(str)
+        if df[c].map(lambda v: isinstance(v, str)).any():
+            df[c] = df[c].where(df[c].notna(), "")
+
+
 def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     """Complete runs -> one dataset whose dimensions are the swept settings.
 
@@ -525,9 +571,7 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
         return xr.Dataset(attrs={"runs": 0})
     df = summary_frame(good)
     df = df.drop(columns=[c for c in df if c.startswith("step_seconds_")] + ["status", "failure"])
-    for c in dims:  # tuples (list-valued settings) are not netCDF values
-        if df[c].map(lambda v: isinstance(v, tuple)).any():
-            df[c] = df[c].map(str)
+    _netcdf_dims(df, dims)
     for c in df:  # flags as 0/1 so that a missing combination can be NaN
         if df[c].map(lambda v: isinstance(v, bool | np.bool_)).all():
             df[c] = df[c].astype(float)
@@ -539,9 +583,7 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     ]
     if phase_rows:
         pf = pd.DataFrame(phase_rows)
-        for c in dims:
-            if pf[c].map(lambda v: isinstance(v, tuple)).any():
-                pf[c] = pf[c].map(str)
+        _netcdf_dims(pf, dims)
         ds = ds.merge(xr.Dataset.from_dataframe(pf.set_index([*dims, "phase"])))
         ds["step_seconds"].attrs.update(
             long_name="mean wall time per step (first step excluded)", units="s"

@@ -45,7 +45,12 @@ from windbench.report.frames import (
 from windbench.scenes import Scene, build_scene
 from windbench.wind.primitives import superpose
 
-BACKEND_COLORS = {"global": "tab:blue", "particles": "tab:orange", "navier_stokes": "tab:green"}
+BACKEND_COLORS = {
+    "global": "tab:blue",
+    "particles": "tab:orange",
+    "particles/mixing": "tab:red",
+    "navier_stokes": "tab:green",
+}
 MARKERS = "osD^v<>ph*"
 LINESTYLES = ("-", "--", ":", "-.")
 SNAPSHOT_FRAMES = 4  # cloth frames in Fig. 3
@@ -740,14 +745,29 @@ def _series(df: pd.DataFrame, x: str, y: str, by=("wind", "scene")):
         yield key, s
 
 
-def cost_exponents(df: pd.DataFrame) -> pd.DataFrame:
-    """Fitted p of wind-phase time ~ cells^p per backend (all scenes) and per scene."""
+def timed(df: pd.DataFrame, contended: bool = False) -> pd.DataFrame:
+    """The runs whose timings are their own cost: without those flagged ``contended``
+    (they shared their cores, :func:`windbench.report.collect.contention`) unless
+    ``contended`` keeps them."""
+    if contended or "contended" not in df:
+        return df
+    return df[~df["contended"].fillna(False).astype(bool)]
+
+
+def cost_exponents(df: pd.DataFrame, contended: bool = False) -> pd.DataFrame:
+    """Fitted p of wind-phase time ~ cells^p per backend (all scenes) and per scene, over
+    the runs :func:`timed` keeps; ``left out (contended)`` counts the others."""
     rows = []
     d = df[np.isfinite(df[WIND_COST].astype(float))] if WIND_COST in df else df.iloc[0:0]
     for wind, g in d.groupby("wind", sort=True):
-        rows.append(_exponent_row(wind, "all scenes", g["grid_cells"], g[WIND_COST]))
-        for (_, scene), s in _series(g, "grid_cells", WIND_COST):
-            rows.append(_exponent_row(wind, scene, s.index.values, s.values))
+        k = timed(g, contended)
+        row = _exponent_row(wind, "all scenes", k["grid_cells"], k[WIND_COST])
+        rows.append({**row, "left out (contended)": len(g) - len(k)})
+        for scene, gs in g.groupby("scene", sort=True):
+            ks = timed(gs, contended)
+            s = ks.groupby("grid_cells")[WIND_COST].mean().sort_index()
+            row = _exponent_row(wind, scene, s.index.values, s.values)
+            rows.append({**row, "left out (contended)": len(gs) - len(ks)})
     return pd.DataFrame(rows)
 
 
@@ -757,7 +777,7 @@ def _exponent_row(wind, scene, cells, seconds) -> dict:
         "wind": wind,
         "scene": scene,
         "runs": len(cells),
-        "cells": f"{int(cells.min())}..{int(cells.max())}",
+        "cells": f"{int(cells.min())}..{int(cells.max())}" if len(cells) else "",
         "fitted (step >= 1 ms)": int((np.asarray(seconds, float) >= MIN_FIT_SECONDS).sum()),
         "exponent p": fit_exponent(cells, seconds),
     }
@@ -769,6 +789,7 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
     if df.empty or WIND_COST not in df or not np.isfinite(df[WIND_COST]).any():
         return Missing("cost_vs_cells", title, "complete runs: `windbench -m experiment=paper`")
     d = df[np.isfinite(df[WIND_COST]) & (df[WIND_COST] > 0)]
+    left_out = len(d) - len(d := timed(d))
     fig = _figure(6.4, 4.4)
     ax = fig.add_subplot()
     scenes = sorted(d["scene"].unique())
@@ -799,7 +820,7 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
         "Median wall time of the wind phase (the backend's own step; cloth and aerodynamics "
         "excluded) per step, first step excluded, against the number of grid cells; lines are "
         "least-squares fits of time ~ cells^p over all scenes of a backend, using only steps "
-        "of at least 1 ms."
+        f"of at least 1 ms. Runs that shared their cores (contended) are left out: {left_out}."
     )
     return _cost_drawn(ax, "grid cells", Drawn("cost_vs_cells", title, caption, fig))
 
@@ -843,6 +864,7 @@ def fig_cost_particles(df: pd.DataFrame) -> Drawn | Missing:
         np.isfinite(d.get("live_particles", pd.Series(dtype=float)))
         & (d.get("live_particles", 0) > 0)
     ]
+    left_out = len(d) - len(d := timed(d))
     if d.empty:
         return Missing(
             "cost_vs_particles",
@@ -857,7 +879,8 @@ def fig_cost_particles(df: pd.DataFrame) -> Drawn | Missing:
         ax.loglog(g["live_particles"], g[COST] * 1e3, MARKERS[i % len(MARKERS)], label=label)
     caption = (
         "Median wall time per step of the particle backend against its mean number of live "
-        "particles; p is the fitted exponent of time ~ particles^p."
+        "particles; p is the fitted exponent of time ~ particles^p. Runs that shared their "
+        f"cores (contended) are left out: {left_out}."
     )
     drawn = Drawn("cost_vs_particles", title, caption, fig)
     return _cost_drawn(ax, "live particles (time mean)", drawn)

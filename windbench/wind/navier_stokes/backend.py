@@ -46,6 +46,7 @@ import numpy as np
 
 from windbench.errors import ConfigError
 from windbench.geometry.raster import triangle_cells
+from windbench.wind import surface_layer
 from windbench.wind.base import Obstacles, WindField
 from windbench.wind.envelope import SourceTimes
 from windbench.wind.navier_stokes import (
@@ -77,6 +78,7 @@ from windbench.wind.navier_stokes.projection import (
 )
 from windbench.wind.primitives import parameter_table, profile_scale, superpose
 from windbench.wind.registry import WindConfig, register_backend
+from windbench.wind.surface_layer import MIXING_LENGTH_LIMIT
 
 ADVECTION = ("semi_lagrangian", "maccormack", "second_order")
 COUPLING = ("none", "paper", "projection")
@@ -99,7 +101,7 @@ class NavierStokesConfig(WindConfig):
     body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
     turbulence: str = "mixing_length"  # none | smagorinsky | mixing_length (eddy viscosity)
     smagorinsky_constant: float = 0.17  # C_s of nu_t = (C_s h)^2 |S|
-    mixing_length_limit: float = 40.0  # m, lambda of Blackadar's 1/l = 1/(kappa z) + 1/lambda
+    mixing_length_limit: float = MIXING_LENGTH_LIMIT  # m, Blackadar's lambda
     seed: int = 0  # synthetic inflow turbulence (conf/wind/navier_stokes.yaml sets ${seed})
 
 
@@ -417,24 +419,20 @@ class NavierStokesWind(WindField):
 
     def _eddy_viscosity_model(self, limit: float) -> np.ndarray | None:
         """nu_t per cell: fixed for ``mixing_length`` (the undisturbed wind's shear at each
-        layer, :func:`.turbulence.surface_layer_viscosity`), updated every step for
+        layer, :func:`windbench.wind.surface_layer.surface_layer_viscosity`), updated every step for
         ``smagorinsky``, None without turbulence or where the wind has no shear."""
         if self.turbulence == "none":
             return None
         if self.turbulence == "smagorinsky":
             return np.zeros(self.grid.shape)
-        z = self.grid.axes()[2] - self.lower[2]
-        eps = 1e-3 * self.h
-        column = np.zeros((len(z), 3))
-        column[:, 2] = self.grid.axes()[2]
-        column[:, :2] = 0.5 * (self.lower[:2] + np.asarray(self.grid.upper)[:2])
-        up, down = column.copy(), column.copy()
-        up[:, 2] += eps
-        down[:, 2] -= eps
-        shear = np.linalg.norm(
-            superpose(self.scene.sources, up) - superpose(self.scene.sources, down), axis=1
-        ) / (2 * eps)
-        layers = turbulence.surface_layer_viscosity(z, shear, limit)
+        layers = surface_layer.sources_viscosity(
+            self.scene.sources,
+            self.grid.axes()[2],
+            self.lower,
+            self.grid.upper,
+            limit,
+            1e-3 * self.h,
+        )
         if not np.any(layers > 0):
             return None
         return np.where(self.solid.astype(bool), 0.0, layers[None, None, :])

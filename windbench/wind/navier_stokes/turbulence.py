@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit, prange
 
 from windbench.wind.navier_stokes.boundaries import cells_beside
@@ -39,20 +38,6 @@ def _centre(q, a, i, j, k):
 
 
 SUBSTEP_LIMIT = 0.9
-
-
-def blackadar_length(z, limit: float) -> np.ndarray:
-    """l = 1 / (1 / (kappa z) + 1 / lambda) (m) at heights ``z`` above the ground."""
-    z = np.asarray(z, dtype=float)
-    return 1.0 / (1.0 / (KARMAN * z) + 1.0 / limit)
-
-
-def surface_layer_viscosity(z, shear, limit: float) -> np.ndarray:
-    """K(z) = l(z)^2 |dU/dz| (m^2/s) from the undisturbed wind's shear (1/s) at ``z``."""
-    return blackadar_length(z, limit) ** 2 * np.abs(shear)
-
-
-KARMAN = 0.41  # von Karman's constant
 
 
 @njit(cache=True, parallel=True)
