@@ -134,40 +134,6 @@ def plate_coefficients(alpha, params: AeroConfig):
     )
 
 
-def added_mass(positions, triangles, cloth, params: AeroConfig) -> np.ndarray:
-    """Artificial added mass of each vertex (kg) for the pressure-jump coupling: rho L_c / 2
-    times a third of the area of the triangles around it, L_c = sqrt(area of its cloth c)
-    (``cloth``: each triangle's cloth).
-
-    The projection moves the cloth's faces as a free membrane would
-    (:func:`windbench.wind.navier_stokes.coupling.move_membranes`), so its pressure holds
-    most of the air's reaction to the cloth's acceleration (added mass, up to about
-    rho pi L / 4 per area for a plate of size L); what a pinned or stretched cloth does
-    differently comes one step late, and an explicit exchange multiplies that part of the
-    acceleration by ``-M_a / m`` each step. Moving m' of inertia to the cloth's side,
-    ``(m + m') a^n+1 = F + m' a^n`` (:func:`added_mass_lag`), keeps the balance
-    ``(m + M_a) a = F`` of a steady acceleration and turns the factor into
-    ``(m' - M_a) / (m + m')``, below 1 in size for every mode when m' >= (M_a - m) / 2
-    (artificial added mass, Foerster, Wall and Ramm 2007)."""
-    x = np.asarray(positions, dtype=np.float64)
-    t = np.asarray(triangles)
-    area = 0.5 * np.linalg.norm(np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]), axis=1)
-    size = np.sqrt(np.bincount(cloth, weights=area))  # L_c
-    per_triangle = 0.5 * float(params.air_density) * size[cloth] * area / 3.0
-    out = np.zeros(x.shape[0])
-    for k in range(3):
-        np.add.at(out, t[:, k], per_triangle)
-    return out
-
-
-def added_mass_lag(added, normals, velocities, previous, dt: float) -> np.ndarray:
-    """Force m' (a . n) n (N per vertex) with a = (v - v_previous) / dt the last step's
-    acceleration: the right-hand side of :func:`added_mass`'s balance."""
-    a = (np.asarray(velocities) - np.asarray(previous)) / dt
-    along = np.einsum("ij,ij->i", a, normals)
-    return (added * along)[:, None] * normals
-
-
 def pressure_forces(loads, triangles, n_vertices: int, params: AeroConfig):
     """(per-triangle, per-vertex) forces (N) of the pressure jump across each triangle:
     ``rho x loads`` (loads: the wind's force over the air density, m^4 s^-2, see

@@ -23,16 +23,9 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm.auto import tqdm
 
 from windbench import metrics, runtime
-from windbench.aero import (
-    AeroParams,
-    added_mass,
-    added_mass_lag,
-    aerodynamic_forces,
-    pressure_forces,
-)
+from windbench.aero import AeroParams, aerodynamic_forces, pressure_forces
 from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
-from windbench.cloth.topology import vertex_normals
 from windbench.config import check_values
 from windbench.dataset import git_commit, run_dataset, write_atomic
 from windbench.errors import ConfigError, SimulationDiverged
@@ -468,7 +461,6 @@ class Simulation:
         self.wind = make_wind(setup.cfg.wind, setup.scene, setup.grid)
         self.cloth_solver = make_cloth_solver(setup.cfg.cloth, setup.cloth, setup.scene.bodies)
         self.state: ClothState = setup.cloth.initial_state()
-        self.previous_velocities = self.state.velocities  # of the step before
         self.mobility = self.cloth_solver.mobility()  # m^2/kg per vertex
         for producer in (self.wind, self.cloth_solver):
             self.recorder.units.update(getattr(producer, "stats_units", {}))
@@ -492,32 +484,20 @@ class Simulation:
         vertex_wind = (
             self.wind.sample(self.state.positions) if s.cloth.n_vertices else np.zeros((0, 3))
         )
-        loads, added = self.wind.cloth_pressure_loads(), None
+        loads = self.wind.cloth_pressure_loads()
         if loads is not None:  # the air's own pressure acts on the cloth
-            tri_f, vert_f, added = self._pressure_coupling(loads)
+            tri_f, vert_f = pressure_forces(loads, s.cloth.triangles, s.cloth.n_vertices, s.aero)
         else:  # paper §3
             tri_f, vert_f = aerodynamic_forces(
                 self.state.positions, self.state.velocities, vertex_wind, s.cloth.triangles, s.aero
             )
         t2 = time.perf_counter()
-        self.previous_velocities = self.state.velocities
-        self.state = self.cloth_solver.step(self.state, vert_f, s.dt, added)
+        self.state = self.cloth_solver.step(self.state, vert_f, s.dt)
         t3, c3 = time.perf_counter(), time.process_time()
         if n < s.spinup_steps:  # spin-up: the wind develops, nothing is recorded
             self._check_finite(n, self.wind.velocity())
             return
         self._record(n, tri_f, (t1 - t0, t2 - t1, t3 - t2, t3 - t0), c3 - c0)
-
-    def _pressure_coupling(self, loads):
-        """(triangle forces, vertex forces, added mass) of the pressure jump
-        (:func:`~windbench.aero.pressure_forces`) with the artificial added mass that keeps
-        the exchange stable (:func:`~windbench.aero.added_mass`)."""
-        s, x, v = self.setup, self.state.positions, self.state.velocities
-        tri_f, vert_f = pressure_forces(loads, s.cloth.triangles, s.cloth.n_vertices, s.aero)
-        added = added_mass(x, s.cloth.triangles, s.cloth.triangle_cloth, s.aero)
-        normals = vertex_normals(x, s.cloth.triangles)
-        vert_f = vert_f + added_mass_lag(added, normals, v, self.previous_velocities, s.dt)
-        return tri_f, vert_f, added
 
     def _record(self, n: int, tri_f, seconds, cpu_seconds: float):
         s, rec = self.setup, self.recorder

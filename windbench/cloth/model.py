@@ -101,7 +101,7 @@ class StaticCloth:
     def __init__(self, model: ClothModel, bodies, params):
         self.model = model
 
-    def step(self, state: ClothState, external_forces, dt: float, added_mass=None) -> ClothState:
+    def step(self, state: ClothState, external_forces: np.ndarray, dt: float) -> ClothState:
         return state
 
     def mobility(self) -> np.ndarray:

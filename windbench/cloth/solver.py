@@ -62,13 +62,7 @@ from windbench.cloth.constraints import (
     solve_chains,
 )
 from windbench.cloth.model import ClothModel, ClothState
-from windbench.cloth.topology import (
-    build_topology,
-    colour_order,
-    tethers,
-    thread_chains,
-    vertex_normals,
-)
+from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import BodyTable, body_table
 
@@ -136,24 +130,12 @@ class FrameConstants(NamedTuple):
 
 
 @njit(cache=True)
-def _predict(c, f_ext, inertia, h, x, p, v):
-    """Step 1: v += h (g + f / m), p = x + h v; pinned vertices stay (v = 0). A vertex with
-    an added mass m_a (``inertia`` = (m_a (n,), unit normals (n, 3))) accelerates along its
-    normal n by (m g + f) . n / (m + m_a) instead: the air it must push aside."""
-    added, normal = inertia
+def _predict(c, f_ext, h, x, p, v):
+    """Step 1: v += h (g + f / m), p = x + h v; pinned vertices stay (v = 0)."""
     for i in range(x.shape[0]):
         if c.inv_mass[i] > 0.0:
             for k in range(3):
                 v[i, k] += h * (c.gravity[k] + f_ext[i, k] * c.inv_mass[i])
-            if added[i] > 0.0:  # take back the normal part the added mass does not get
-                m = c.mass[i]
-                an = 0.0
-                for k in range(3):
-                    an += (c.gravity[k] + f_ext[i, k] * c.inv_mass[i]) * normal[i, k]
-                cut = h * an * added[i] / (m + added[i])
-                for k in range(3):
-                    v[i, k] -= cut * normal[i, k]
-            for k in range(3):
                 p[i, k] = x[i, k] + h * v[i, k]
         else:
             for k in range(3):
@@ -261,7 +243,7 @@ def _frame_figures(c, f_ext, x, p, v):
 
 
 @njit(cache=True)
-def xpbd_frame(model, frame, x, v, f_ext, inertia, out, work):
+def xpbd_frame(model, frame, x, v, f_ext, out, work):
     """One frame of ``substeps`` XPBD substeps (module docstring, steps 1-5).
 
     Inputs x, v, f_ext (n, 3); outputs ``out`` = (x_out, v_out); ``work`` = (x scratch
@@ -278,7 +260,7 @@ def xpbd_frame(model, frame, x, v, f_ext, inertia, out, work):
     normal = np.empty(3)
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     for sub in range(s.substeps):
-        _predict(c, f_ext, inertia, h, xp, p, vv)  # 1.
+        _predict(c, f_ext, h, xp, p, vv)  # 1.
         lam[:] = 0.0  # XPBD multipliers of the substep
         _distance_passes(c, frame, s.edge_iterations, p, lam, chain_work)  # 2a.
         if (sub + 1) % frame.bend_every == 0:  # 2b. soft bending: every bend_every-th
@@ -544,16 +526,6 @@ class Workspace:
     frame: FrameConstants | None = None
 
 
-def _inertia(model: ClothModel, x: np.ndarray, added_mass) -> tuple[np.ndarray, np.ndarray]:
-    """(added mass (n,), unit vertex normals (n, 3)) of a frame (:func:`_predict`); zeros
-    without an added mass."""
-    n = x.shape[0]
-    if added_mass is None:
-        return np.zeros(n), np.zeros((n, 3))
-    normal = vertex_normals(x, model.triangles)
-    return np.ascontiguousarray(added_mass, dtype=np.float64), normal
-
-
 class XPBDCloth:
     """The XPBD solver (module docstring): ``step(state, forces, dt) -> state``."""
 
@@ -613,26 +585,16 @@ class XPBDCloth:
             self.workspace.frame = frame_constants(self.tables, self.hinge_s, dt)
         return self.workspace.frame
 
-    def step(self, state: ClothState, external_forces, dt: float, added_mass=None) -> ClothState:
-        """Advance all cloths by one frame ``dt`` under gravity and ``external_forces`` (N);
-        ``added_mass`` (kg per vertex, default none) resists acceleration along the cloth's
-        normal (:func:`_predict`)."""
+    def step(self, state: ClothState, external_forces, dt: float) -> ClothState:
+        """Advance all cloths by one frame ``dt`` under gravity and ``external_forces`` (N)."""
         x = np.ascontiguousarray(state.positions, dtype=np.float64)
         v = np.ascontiguousarray(state.velocities, dtype=np.float64)
         f = np.ascontiguousarray(external_forces, dtype=np.float64).reshape(x.shape)
         frame = self.frame_constants(float(dt))
         out = (np.empty_like(x), np.empty_like(v))
         w = self.workspace
-        inertia = _inertia(self.model, x, added_mass)
         work, energy, finite = xpbd_frame(
-            self.tables,
-            frame,
-            x,
-            v,
-            f,
-            inertia,
-            out,
-            (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps),
+            self.tables, frame, x, v, f, out, (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps)
         )
         frames = state.frames + 1
         if not finite:

@@ -58,19 +58,6 @@ def triangle_areas(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(x1 - x0, x2 - x0), axis=1)
 
 
-def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Unit normal at each vertex: the sum of its triangles' area-weighted normals
-    ``(x1 - x0) x (x2 - x0)``, normalised; (0, 0, 0) where they cancel or there are none."""
-    x = np.asarray(positions, dtype=np.float64)
-    t = np.asarray(triangles)
-    face = np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]])
-    normal = np.zeros_like(x)
-    for k in range(3):
-        np.add.at(normal, t[:, k], face)
-    length = np.linalg.norm(normal, axis=1, keepdims=True)
-    return np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
-
-
 def dihedral_angles(positions: np.ndarray, hinges: np.ndarray) -> np.ndarray:
     """Signed dihedral angle of each hinge, the same convention as the solver's kernel.
 

@@ -11,6 +11,7 @@ import pytest
 from tests.wind.navier_stokes.test_backend import box_scene, make
 from windbench.cli import compose_config
 from windbench.cloth.mesh import flag_mesh
+from windbench.errors import ConfigError
 from windbench.simulate import run
 from windbench.wind.base import Obstacles
 from windbench.wind.navier_stokes import coupling
@@ -125,3 +126,9 @@ def test_flags_coupled_through_pressure_stay_finite_and_feel_the_wind(tmp_path, 
             force = np.linalg.norm(ds.aero_force.isel(cloth=0).values, axis=-1)
             mean[mode] = force[force.size // 2 :].mean()
     assert mean["projection"] >= 0.5 * mean["paper"]
+
+
+def test_projection_coupling_with_the_second_order_scheme_is_refused():
+    spec = box_scene(CHANNEL, [{"type": "uniform", "velocity": [U, 0, 0]}])
+    with pytest.raises(ConfigError, match="wind.coupling"):
+        make(spec, 8, coupling="projection", advection="second_order")

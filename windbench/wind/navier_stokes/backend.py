@@ -112,6 +112,12 @@ def _check(params):
     name = str(params.get("coupling"))
     if name not in COUPLING:
         raise ConfigError("wind.coupling", f"must be one of {list(COUPLING)}, got {name!r}")
+    if name == "projection" and str(params.get("advection")) == "second_order":
+        raise ConfigError(
+            "wind.coupling",
+            "projection works with wind.advection semi_lagrangian or maccormack, not "
+            "second_order (its projection carries half the pressure to the next step)",
+        )
     name = str(params.get("turbulence"))
     if name not in TURBULENCE:
         raise ConfigError("wind.turbulence", f"must be one of {list(TURBULENCE)}, got {name!r}")
@@ -591,10 +597,8 @@ class NavierStokesWind(WindField):
 
     def _pressure_loads(self, dt: float, obstacles: Obstacles) -> None:
         """Pressure force over rho on each cloth triangle
-        (:func:`.coupling.triangle_pressure_loads`): p / rho = psi h / dt for a step whose
-        psi holds dt grad p, twice that when it holds dt/2 grad p (``second_order`` after
-        its first step)."""
-        share = 0.5 if (self.advection == "second_order" and self._pressure_scale == 1.0) else 1
+        (:func:`.coupling.triangle_pressure_loads`): p / rho = psi h / dt, psi holding
+        dt grad p (``projection`` runs with the first-order schemes only)."""
         self._loads = coupling.triangle_pressure_loads(
             np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64),
             np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64),
@@ -602,7 +606,7 @@ class NavierStokesWind(WindField):
             self.solid,
             self.lower,
             self.h,
-            self.h / (dt * share),
+            self.h / dt,
         )
 
     def cloth_pressure_loads(self) -> np.ndarray | None:
