@@ -70,6 +70,7 @@ def eddy_viscosity(u, v, w, solid, axes, h, length2, out):
 
 @njit(cache=True, inline="always")
 def _clamp(i, n):
+    """Index i held inside 0..n-1 (a one-sided difference at the grid's edge)."""
     return min(max(i, 0), n - 1)
 
 
