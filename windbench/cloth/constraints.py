@@ -265,6 +265,18 @@ def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, wo
 
 
 @njit(cache=True, inline="always")
+def _move_pair(p, i, j, steps, d):
+    """p_i += s_i d, p_j -= s_j d: an edge constraint's correction along d = p_i - p_j."""
+    si, sj = steps
+    p[i, 0] += si * d[0]
+    p[i, 1] += si * d[1]
+    p[i, 2] += si * d[2]
+    p[j, 0] -= sj * d[0]
+    p[j, 1] -= sj * d[1]
+    p[j, 2] -= sj * d[2]
+
+
+@njit(cache=True, inline="always")
 def limit_edge(p, inv_mass, i, j, rest, limit, trigger2):
     """Strain limit of one edge (Provot 1995): if it is longer than ``sqrt(trigger2) L``, bring
     it to ``(1 + limit) L`` as a rigid constraint, ``dlambda = -C / (w_i + w_j)``. Returns
@@ -277,12 +289,7 @@ def limit_edge(p, inv_mass, i, j, rest, limit, trigger2):
     ln = math.sqrt(ln2)
     s = ((1.0 + limit) * rest - ln) / (w * ln)
     si, sj = inv_mass[i] * s, inv_mass[j] * s
-    p[i, 0] += si * dx
-    p[i, 1] += si * dy
-    p[i, 2] += si * dz
-    p[j, 0] -= sj * dx
-    p[j, 1] -= sj * dy
-    p[j, 2] -= sj * dz
+    _move_pair(p, i, j, (si, sj), (dx, dy, dz))
     return True
 
 
@@ -333,12 +340,7 @@ def project_shear_edges(p, inv_mass, edges, rest, alpha, scale, lam, first):
         dl = (rest[e] - ln - alpha[e] * lam[e]) * scale[e]
         lam[e] += dl
         si, sj = inv_mass[i] * dl * inv_ln, inv_mass[j] * dl * inv_ln
-        p[i, 0] += si * dx
-        p[i, 1] += si * dy
-        p[i, 2] += si * dz
-        p[j, 0] -= sj * dx
-        p[j, 1] -= sj * dy
-        p[j, 2] -= sj * dz
+        _move_pair(p, i, j, (si, sj), (dx, dy, dz))
 
 
 @njit(cache=True)
