@@ -498,7 +498,8 @@ def dot(a, b):
 @njit(cache=True, parallel=True)
 def cg_update(alpha, p, q, x, r, r_low):
     """x += alpha p, r -= alpha q, r_low = r in r_low's precision (the next cycle's
-    right-hand side, in the same pass); return r . r (by planes, thread-count independent)."""
+    right-hand side, in the same pass); return r . r (by planes, thread-count independent).
+    The arithmetic is float64 whatever the precision the vectors are stored in."""
     n0, n1, n2 = x.shape
     partial = np.empty(n0)
     for i in prange(n0):
@@ -614,7 +615,9 @@ class _Level:
 class MultigridPoisson:
     """MGPCG solver of A psi = b on a fixed grid whose face weights may change per step."""
 
-    def __init__(self, shape, periodic, singular: bool, min_coarse: int = 4):
+    def __init__(self, shape, periodic, singular: bool, min_coarse: int = 4, dtype=np.float64):
+        """``dtype``: CG's vectors r, p and A p (the solution x and the reductions stay in
+        float64 whatever it is, see :func:`cg_update`)."""
         self.periodic = np.asarray(periodic, dtype=np.bool_)
         self.singular = singular
         levels = [_Level(shape, np.ones(3), self.periodic, PRECONDITIONER_DTYPE, FINE_OMEGA)]
@@ -641,10 +644,10 @@ class MultigridPoisson:
         )  # fmt: skip
         fine = levels[0]
         self.active = np.zeros(fine.shape, dtype=np.bool_)
-        self.r = np.zeros(fine.shape)
-        self.z = np.zeros(fine.shape) if singular else None  # M r with the constant removed
-        self.p = np.zeros(fine.shape)
-        self.q = np.zeros(fine.shape)
+        self.r = np.zeros(fine.shape, dtype)
+        self.z = np.zeros(fine.shape, dtype) if singular else None  # M r, constant removed
+        self.p = np.zeros(fine.shape, dtype)
+        self.q = np.zeros(fine.shape, dtype)
         self.rhs_norm = 0.0  # ||b||_2 of the last solve
 
     @property
