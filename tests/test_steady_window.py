@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from windbench.cli import compose_config
+from windbench.config import ConfigError
 from windbench.metrics import unsettled_reason
-from windbench.simulate import FLOW_THROUGHS, prepare
+from windbench.simulate import FLOW_THROUGHS, MIN_WINDOW, WINDOW_FLOW_THROUGHS, prepare
 
 EMPTY = ["scene=empty", "grid.resolution=8", "sim.dt=0.05"]  # 4 m at 6 m/s: T = 2/3 s
 
@@ -37,6 +38,22 @@ def test_auto_spin_up_is_two_flow_through_times():
     assert setup.analysis_start == pytest.approx(setup.start_time)
     short = prepare(compose_config([*EMPTY, "sim.spinup=0", "sim.duration=2"]))
     assert short.analysis_start == pytest.approx(FLOW_THROUGHS * 4.0 / 6.0)
+
+
+def test_auto_duration_records_one_flow_through_time_at_least_the_minimum():
+    """two_flags_wall: L = 24 m at U = 6 m/s, T = 4 s; the empty 4 m box: T = 2/3 s, so the
+    shortest window MIN_WINDOW applies."""
+    wall = prepare(compose_config(["scene=two_flags_wall", "sim.dt=0.05", "sim.duration=auto"]))
+    assert wall.n_steps * wall.dt == pytest.approx(WINDOW_FLOW_THROUGHS * 4.0)
+    empty = prepare(compose_config([*EMPTY, "sim.duration=auto"]))
+    assert empty.n_steps * empty.dt == pytest.approx(max(MIN_WINDOW, 4.0 / 6.0))
+
+
+@pytest.mark.parametrize("key", ["duration", "spinup"])
+@pytest.mark.parametrize("value", ["soon", "-1"])
+def test_a_bad_window_length_is_refused_naming_the_key(key, value):
+    with pytest.raises(ConfigError, match=rf"sim\.{key}: must be 'auto' or a number"):
+        prepare(compose_config([*EMPTY, f"sim.{key}={value}"]))
 
 
 def test_a_run_without_a_window_is_unsettled_with_the_reason():

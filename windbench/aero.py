@@ -26,6 +26,12 @@ With no wind (u = 0) the same law is air resistance on a moving plate.
 
 Each triangle's force is shared equally by its three vertices, so the vertex forces sum
 to the triangle force. Zero relative velocity or zero area gives zero force, never NaN.
+
+Where the wind's own solve closes the cloth (``navier_stokes`` with ``wind.coupling=
+projection``) the force on a triangle is instead the jump of the air's pressure across
+it, ``(p_front - p_back) n A`` (:func:`pressure_forces`): the air that the cloth stops
+pushes on it, and the §3 law, which sees only the relative velocity the coupled air no
+longer has, is not used.
 """
 
 from __future__ import annotations
@@ -126,3 +132,15 @@ def plate_coefficients(alpha, params: AeroConfig):
     return params.drag_coefficient * np.sin(alpha), (
         params.lift_coefficient * np.sin(alpha) * np.cos(alpha)
     )
+
+
+def pressure_forces(loads, triangles, n_vertices: int, params: AeroConfig):
+    """(per-triangle, per-vertex) forces (N) of the pressure jump across each triangle:
+    ``rho x loads`` (loads: the wind's force over the air density, m^4 s^-2, see
+    :meth:`windbench.wind.base.WindField.cloth_pressure_loads`), shared equally by the three
+    corners."""
+    tri = float(params.air_density) * np.asarray(loads, dtype=np.float64)
+    vert = np.zeros((n_vertices, 3))
+    for k in range(3):
+        np.add.at(vert, triangles[:, k], tri / 3.0)
+    return tri, vert

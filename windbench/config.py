@@ -106,7 +106,11 @@ class SimConfig:
     spinup: Any = setting(
         "auto", "s", "simulated before recording starts; auto: two flow-through times"
     )
-    duration: float = setting(1.0, "s", "simulated time recorded after the spin-up", gt=0)
+    duration: Any = setting(
+        1.0,
+        "s",
+        "simulated time recorded after the spin-up; auto: one flow-through time, at least 1 s",
+    )
     max_steps: int = setting(
         100_000, "1", "largest step count (sim.duration / sim.dt) accepted", ge=1
     )
@@ -312,7 +316,14 @@ def check_values(cfg) -> None:
     for key in cfg:
         if key != "hydra":  # Hydra's own node (when composed with it) is not a run setting
             check_finite(cfg[key], f"{key}.")
-    for key, f in schema_fields():
-        value = OmegaConf.select(cfg, key, default=None)
+    check_settings(cfg, WindbenchConfig)
+
+
+def check_settings(node, schema: type, prefix: str = "") -> None:
+    """ConfigError for the first :func:`setting` of ``schema`` whose value in ``node`` is out
+    of its range; the error names the key as ``prefix`` + its dotted path (a backend checks
+    its ``wind`` node with prefix ``wind.``)."""
+    for key, f in schema_fields(schema, prefix):
+        value = OmegaConf.select(node, key.removeprefix(prefix), default=None)
         if value is not None and not _in_range(value, f.metadata):
             raise ConfigError(key, f"must be {allowed(f.metadata)}, got {value!r}")

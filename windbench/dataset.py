@@ -281,7 +281,7 @@ def _run_attrs(setup: RunSetup, status: str, failure: str, n: int) -> dict:
         scene=setup.scene.name,
         resolution=int(cfg.grid.resolution),
         dt=setup.dt,
-        duration=float(cfg.sim.duration),
+        duration=setup.n_steps * setup.dt,
         spinup=setup.start_time,
         flow_through_time=setup.flow_through_time,
         analysis_start=setup.analysis_start,

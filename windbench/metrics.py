@@ -84,6 +84,19 @@ def force_ratio(sheltered_force: np.ndarray, exposed_force: np.ndarray) -> float
     return float(np.linalg.norm(sheltered_force)) / exposed if exposed > 0 else float("nan")
 
 
+def plane_flux_ratio(u, undisturbed, solid, axis: int = 0) -> np.ndarray:
+    """Volume flux through each plane of cells across ``axis`` over the undisturbed wind's:
+    sum of u_axis over the plane's air cells / sum of the sources' wind over all its cells
+    (the cell areas cancel). 1 where no air is lost; the paper's lee, whose particles stop
+    at bodies, loses the flux of what they blocked."""
+    u, undisturbed = (
+        np.moveaxis(u[..., axis], axis, 0),
+        np.moveaxis(undisturbed[..., axis], axis, 0),
+    )
+    air = ~np.moveaxis(np.asarray(solid, bool), axis, 0)
+    return (u * air).reshape(len(u), -1).sum(axis=1) / undisturbed.reshape(len(u), -1).sum(axis=1)
+
+
 def unsettled_reason(times, analysis_start: float) -> str:
     """Why a run's recorded ``times`` hold no steady window (no step at or after
     ``analysis_start``); empty when they hold one."""

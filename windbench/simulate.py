@@ -23,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm.auto import tqdm
 
 from windbench import metrics, runtime
-from windbench.aero import AeroParams, aerodynamic_forces
+from windbench.aero import AeroParams, aerodynamic_forces, pressure_forces
 from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.config import check_values
@@ -93,22 +93,17 @@ def prepare(cfg: DictConfig) -> RunSetup:
     scales with a user number is estimated (:func:`memory_plan`) before it is made.
     """
     check_values(cfg)
-    dt, duration = float(cfg.sim.dt), float(cfg.sim.duration)
-    _require(duration >= dt, "sim.duration", f"must be at least sim.dt = {dt} s, got {duration}")
-    n_steps = int(round(duration / dt))
-    _require(
-        n_steps <= cfg.sim.max_steps,
-        "sim.dt",
-        f"{dt} s over sim.duration = {duration} s is {n_steps} steps, more than "
-        f"sim.max_steps = {cfg.sim.max_steps}; raise sim.max_steps to run that many",
-    )
+    dt = float(cfg.sim.dt)
+    for key in ("duration", "spinup"):  # a bad number is refused before any mesh is built
+        _seconds(cfg.sim[key], f"sim.{key}", math.nan)
     check_filename(str(cfg.output.filename))
     runtime.thread_count(cfg.runtime.threads)  # a bad runtime.threads: refused now
     backend = backend_class(cfg.wind.name)  # unknown backend: error listing the allowed ones
     _check_cloth_specs(cfg.scene)  # before the meshes are built
     scene = build_scene(cfg.scene)
+    n_steps = _recorded_steps(cfg.sim, scene)
     grid = Grid.from_domain(scene.lower, scene.upper, int(cfg.grid.resolution))  # no arrays yet
-    spinup_steps = int(round(_spinup(cfg.sim.spinup, scene) / dt))
+    spinup_steps = int(round(_seconds(cfg.sim.spinup, "sim.spinup", _auto_spinup(scene)) / dt))
     _require(
         spinup_steps + n_steps <= cfg.sim.max_steps,
         "sim.spinup",
@@ -178,22 +173,58 @@ def analysis_window(scene: Scene, start: float, end: float) -> tuple[float, floa
     return flow_through, max(start, FLOW_THROUGHS * flow_through)
 
 
-def _spinup(value, scene: Scene) -> float:
-    """``sim.spinup`` in seconds: ``auto`` is FLOW_THROUGHS flow-through times (0 for a
-    scene without flow through), so that recording starts with a developed wind."""
+WINDOW_FLOW_THROUGHS = 1.0  # sim.duration=auto records this many flow-through times,
+MIN_WINDOW = 1.0  # s, and at least this long (a scene without flow through: this long)
+
+
+def _auto_spinup(scene: Scene) -> float:
+    """``sim.spinup=auto``: FLOW_THROUGHS flow-through times (0 for a scene without flow
+    through), so that recording starts with a developed wind."""
+    flow_through = flow_through_time(scene)
+    return FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+
+
+def _auto_duration(scene: Scene) -> float:
+    """``sim.duration=auto``: the steady window spans WINDOW_FLOW_THROUGHS flow-through
+    times, at least MIN_WINDOW. A time mean over a separated wake needs several of its
+    shedding periods (about H / (0.2 U) behind an obstacle of height H); one flow-through
+    time of a domain that reaches several H behind the obstacle holds them."""
+    flow_through = flow_through_time(scene)
+    window = WINDOW_FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+    return max(window, MIN_WINDOW)
+
+
+def _seconds(value, key: str, auto: float) -> float:
+    """``value`` of ``key`` in seconds: ``auto`` becomes ``auto``; anything else must be a
+    finite number >= 0 (a duration > 0)."""
     if str(value) == "auto":
-        flow_through = flow_through_time(scene)
-        return FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+        return auto
     try:
         seconds = float(value)
     except (TypeError, ValueError):
         seconds = math.nan
+    positive = key == "sim.duration"
     _require(
-        np.isfinite(seconds) and seconds >= 0,
-        "sim.spinup",
-        f"must be 'auto' or a number of seconds >= 0, got {value!r}",
+        np.isfinite(seconds) and (seconds > 0 if positive else seconds >= 0),
+        key,
+        f"must be 'auto' or a number of seconds {'>' if positive else '>='} 0, got {value!r}",
     )
     return seconds
+
+
+def _recorded_steps(sim, scene: Scene) -> int:
+    """Steps recorded after the spin-up: ``sim.duration / sim.dt``, at most ``sim.max_steps``."""
+    dt = float(sim.dt)
+    duration = _seconds(sim.duration, "sim.duration", _auto_duration(scene))
+    _require(duration >= dt, "sim.duration", f"must be at least sim.dt = {dt} s, got {duration}")
+    n_steps = int(round(duration / dt))
+    _require(
+        n_steps <= sim.max_steps,
+        "sim.dt",
+        f"{dt} s over sim.duration = {duration:.6g} s is {n_steps} steps, more than "
+        f"sim.max_steps = {sim.max_steps}; raise sim.max_steps to run that many",
+    )
+    return n_steps
 
 
 def _wake_reference(scene: Scene):
@@ -430,6 +461,7 @@ class Simulation:
         self.wind = make_wind(setup.cfg.wind, setup.scene, setup.grid)
         self.cloth_solver = make_cloth_solver(setup.cfg.cloth, setup.cloth, setup.scene.bodies)
         self.state: ClothState = setup.cloth.initial_state()
+        self.mobility = self.cloth_solver.mobility()  # m^2/kg per vertex
         for producer in (self.wind, self.cloth_solver):
             self.recorder.units.update(getattr(producer, "stats_units", {}))
 
@@ -439,6 +471,7 @@ class Simulation:
             self.state.positions,
             self.state.velocities,
             self.setup.cloth.triangles,
+            float(self.setup.aero.air_density) * self.mobility,
         )
 
     def step(self, n: int):
@@ -451,9 +484,13 @@ class Simulation:
         vertex_wind = (
             self.wind.sample(self.state.positions) if s.cloth.n_vertices else np.zeros((0, 3))
         )
-        tri_f, vert_f = aerodynamic_forces(
-            self.state.positions, self.state.velocities, vertex_wind, s.cloth.triangles, s.aero
-        )
+        loads = self.wind.cloth_pressure_loads()
+        if loads is not None:  # the air's own pressure acts on the cloth
+            tri_f, vert_f = pressure_forces(loads, s.cloth.triangles, s.cloth.n_vertices, s.aero)
+        else:  # paper §3
+            tri_f, vert_f = aerodynamic_forces(
+                self.state.positions, self.state.velocities, vertex_wind, s.cloth.triangles, s.aero
+            )
         t2 = time.perf_counter()
         self.state = self.cloth_solver.step(self.state, vert_f, s.dt)
         t3, c3 = time.perf_counter(), time.process_time()

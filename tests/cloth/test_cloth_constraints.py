@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from windbench.cloth.constraints import (
+    edge_stretch,
     fast_atan2,
+    limit_edges,
     project_hinge,
     project_shear_edges,
     project_tethers,
@@ -176,3 +178,55 @@ def test_a_rigid_shear_edge_gets_its_length_and_keeps_its_centre_of_mass():
     assert (
         lam[0] == 0.0 and lam[2] == 0.0 and lam[1] == pytest.approx(-0.25)
     )  # (L - l) / (w_i + w_j)
+
+
+def test_edge_strain_limit_moves_only_the_edges_over_the_trigger():
+    """An edge 20 % long is brought to exactly (1 + limit) L along its line, its centre of
+    mass kept; one 3.2 % long (under the trigger 1 + 1.1 x 3 %) and one between two pins are
+    left alone; only the moved edge's vertices are flagged."""
+    p = np.array([[0, 0, 0], [0, 0, 1.2], [5, 0, 0], [5, 0, 1.032], [9, 0, 0], [9, 0, 2]], float)
+    inv_mass = np.array([1.0, 3.0, 1.0, 1.0, 0.0, 0.0])
+    edges = np.array([[0, 1], [2, 3], [4, 5]])
+    rest = np.ones(3)
+    x, moved = p.copy(), np.zeros(6, bool)
+    assert limit_edges(p, inv_mass, edges, rest, 0, 3, 0.03, moved, _stamps(6, 3)) == 1
+    assert p[1, 2] - p[0, 2] == pytest.approx(1.03, rel=1e-14)
+    np.testing.assert_allclose(p[:2, :2], 0.0, atol=0)
+    mass = 1.0 / inv_mass[:2]
+    np.testing.assert_allclose(mass @ p[:2], mass @ x[:2], rtol=1e-14)
+    np.testing.assert_array_equal(p[2:], x[2:])
+    np.testing.assert_array_equal(moved, [True, True, False, False, False, False])
+
+
+def test_edge_stretch_gives_the_largest_elongation_and_the_edges_beyond_a_limit():
+    x = np.array([[0.0, 0, 0], [1.1, 0, 0], [1.1, 2.02, 0], [0, 0, 0.5]])
+    edges = np.array([[0, 1], [1, 2], [0, 3]])
+    rest = np.array([1.0, 2.0, 0.5])  # stretched by 10 %, 1 %, 0
+    top, over = edge_stretch(x, edges, rest, 0.03)
+    assert top == pytest.approx(0.1, rel=1e-12) and over == 1
+    assert edge_stretch(x, edges, rest, 0.005)[1] == 2
+
+
+def _stamps(n, e):
+    return np.full(n, -1, np.int64), np.full(e, -1, np.int64), np.zeros(1, np.int64)
+
+
+def test_edge_strain_limit_skipping_untouched_edges_gives_the_same_bits():
+    """Passes that skip the edges whose vertices did not move since their last test end
+    where passes that test every edge end, bit for bit."""
+    rng = np.random.default_rng(3)
+    rest_x = rng.uniform(0, 1, (40, 3))
+    edges = np.array([(i, j) for i in range(40) for j in range(i + 1, 40) if rng.random() < 0.1])
+    rest = np.linalg.norm(rest_x[edges[:, 0]] - rest_x[edges[:, 1]], axis=1)
+    inv_mass = rng.uniform(0.5, 2.0, 40)
+    start = rest_x * rng.uniform(1.0, 1.3, (40, 1))  # stretched
+    kept, fresh = start.copy(), start.copy()
+    stamps = _stamps(40, len(edges))
+    moved = np.zeros(40, bool)
+    for _ in range(20):
+        a = limit_edges(kept, inv_mass, edges, rest, 0, len(edges), 0.03, moved, stamps)
+        b = limit_edges(
+            fresh, inv_mass, edges, rest, 0, len(edges), 0.03, moved, _stamps(40, len(edges))
+        )
+        assert a == b
+    assert np.array_equal(kept, fresh) and not np.array_equal(kept, start)

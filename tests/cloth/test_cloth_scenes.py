@@ -105,7 +105,7 @@ CHARACTER = np.array([1.5, 1.5, 0.0])  # conf/scene/shirt.yaml: the meshes' offs
 def _shirt_run(tmp_path, duration):
     """The shirt (about 4100 vertices, a 64 x 64 cloth) in the global wind, and how deep its
     vertices end inside the character's field (the one its mesh was made from)."""
-    overrides = ["scene=shirt", "wind=global", f"sim.duration={duration}"]
+    overrides = ["scene=shirt", "wind=global", f"sim.duration={duration}", "sim.spinup=0"]
     ds = _run(tmp_path, overrides)
     last = ds.cloth_position.isel(time=-1).values
     depth = -character.body_field(last - CHARACTER)

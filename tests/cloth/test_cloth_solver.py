@@ -258,3 +258,32 @@ def test_soft_bending_is_projected_every_other_substep_only_when_resolved(
     assert solver.frame_constants(DT).bend_every == expected
     first = solver.step(model.initial_state(), np.zeros((model.n_vertices, 3)), DT)
     assert np.isfinite(first.positions).all()
+
+
+def test_contact_clearance_skips_no_contact():
+    """The contact query at p is skipped while LIPSCHITZ |p - q| < d(q) - margin (q: where
+    the distance was last computed). Point pairs near a capsule, a box and a tabulated mesh
+    (the shirt's character): none so skipped lies within the margin. The slope bound holds
+    everywhere but where p leaves the mesh's lattice, out where the distance is that to
+    its bounding box, PAD_CELLS spacings or more, far beyond the margin."""
+    from windbench.cli import compose_config
+    from windbench.cloth.collision import LIPSCHITZ
+    from windbench.scenes import build_scene
+
+    bodies = (
+        body_from_config({"type": "capsule", "a": [-1, 0, 0], "b": [1, 0, 0], "radius": 0.2}, "b"),
+        body_from_config({"type": "box", "min": [0.2, -1, -1], "max": [0.3, 1, 0.25]}, "w"),
+        *build_scene(compose_config(["scene=shirt"]).scene).bodies,
+    )
+    rng = np.random.default_rng(5)
+    centres = np.concatenate([[[0, 0, 0]], [[1.5, 1.5, 1.2]]])
+    q = centres[rng.integers(0, 2, 4000)] + rng.uniform(-0.5, 0.5, (4000, 3))
+    p = q + rng.normal(0.0, 0.02, q.shape)
+    dq, dp = distances(bodies, q)[0], distances(bodies, p)[0]
+    step = np.linalg.norm(p - q, axis=1)
+    margin = ClothConfig().collision_margin
+    skipped = LIPSCHITZ * step < dq - margin
+    assert skipped.sum() > 1000 and np.all(dp[skipped] >= margin)
+    near = np.abs(dq) < 0.02  # well inside the lattice (spacing 1 cm, padded by 3)
+    assert np.all(dp[near] >= dq[near] - LIPSCHITZ * step[near])
+    assert np.any(np.abs(dp - dq) > 0.5 * step)  # the pairs do probe the slope

@@ -203,3 +203,62 @@ def test_colour_order_is_a_greedy_colouring_of_the_hinges():
             for lower in range(c):
                 earlier = order[(colour == lower) & (priority[order] < priority[k])]
                 assert np.isin(t.hinges[earlier], t.hinges[k]).any()
+
+
+def _jittered(mesh, seed=3, amount=0.2):
+    """The flag with its interior vertices moved in its plane by up to ``amount`` of a cell:
+    the same triangles, no longer halves of rectangles."""
+    rng = np.random.default_rng(seed)
+    x = mesh.vertices.copy()
+    ids = np.arange(NU * NV).reshape(NU, NV)[1:-1, 1:-1].ravel()
+    cell = np.array([W / (NU - 1), H / (NV - 1)])
+    x[ids, :2] += amount * cell * rng.uniform(-1, 1, (ids.size, 2))
+    return x
+
+
+def test_only_lattices_have_shear_edges():
+    """A flag and a tube shirt are lattices (right triangles): one shear diagonal per cell.
+    Moving the flag's inner vertices makes it irregular: every edge is a stretch edge. In a
+    model of both, each cloth keeps its own kind."""
+    mesh = _flag()
+    tube = shirt_mesh(
+        {"collar": [0, 0, 1], "radius": 0.2, "length": 0.5, "resolution": [12, 6]}
+        | {"shoulder_width": 0.5, "sleeve_radius": 0.08, "sleeve_length": 0.2},
+        "s",
+    )
+    for m in (mesh, tube):
+        t = build_topology(m.vertices, m.triangles)
+        assert t.edge_lattice.all() and t.edge_shear.sum() == m.triangles.shape[0] // 2
+    jitter = _jittered(mesh)
+    t = build_topology(jitter, mesh.triangles)
+    assert not t.edge_lattice.any() and not t.edge_shear.any()
+    both = np.concatenate([mesh.vertices, jitter])
+    tris = np.concatenate([mesh.triangles, mesh.triangles + NU * NV])
+    cloth = np.repeat([0, 1], mesh.triangles.shape[0])
+    t = build_topology(both, tris, cloth)
+    first = t.edges[:, 0] < NU * NV
+    assert t.edge_lattice[first].all() and not t.edge_lattice[~first].any()
+    assert t.edge_shear.sum() == (NU - 1) * (NV - 1)
+
+
+@pytest.mark.parametrize("limit", [0.0, 0.03])
+def test_irregular_cloth_keeps_the_strain_limit_hanging_from_its_pins(limit):
+    """The jittered flag of a soft membrane (Y = 5 N/m: its weight alone stretches it by
+    some 25 %) hung by its two top corners in still air for 2 s: with the limit no edge is
+    longer than the limit's trigger, (1 + 1.1 limit) L; without it they are."""
+    from tests.cloth.test_cloth_solver import _run
+
+    mesh = _flag(pin="top_corners")
+    soft = {"stretch_stiffness": 5.0}
+    cloth = ClothModel.from_meshes(
+        [type(mesh)("c", _jittered(mesh), mesh.triangles, mesh.pinned, soft)]
+    )
+    cfg = ClothConfig()
+    cfg.strain_limit = limit
+    solver = XPBDCloth(cloth, (), cfg)
+    c = solver.tables.constraints
+    assert c.n_lattice == 0 and c.n_stretch == len(solver.topology.edges)
+    state, _ = _run(solver, cloth, 120, air=True)
+    assert state.positions[:, 2].min() < -0.5  # it hangs
+    stretch = solver.max_stretch(state.positions)
+    assert stretch <= 0.033 + 1e-9 if limit else stretch > 0.1

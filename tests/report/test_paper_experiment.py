@@ -1,8 +1,8 @@
 """The paper comparison's sweeps (conf/experiment/paper.yaml lists them): together they
 cover the paper's scenes, every backend, three resolutions spanning 4x, two time steps,
-three particle seeds and, per scene, a second-order reference at least twice as fine as
-the finest compared run with two coarser levels; every run they hold passes the run
-checks (no ConfigError mid-sweep)."""
+three particle seeds, the particles' mixing lee beside the paper's and, per scene, a
+second-order reference at least twice as fine as the finest compared run with two coarser
+levels; every run they hold passes the run checks (no ConfigError mid-sweep)."""
 
 from __future__ import annotations
 
@@ -32,6 +32,7 @@ def _sweep(experiment: str, *overrides: str) -> dict[str, list[str]]:
     for key in ("grid.resolution", "sim.dt", "seed"):
         params.setdefault(key, [str(OmegaConf.select(cfg, key))])
     params["wind.advection"] = [str(cfg.wind.advection)] if "advection" in cfg.wind else []
+    params["wind.lee_model"] = [str(cfg.wind.lee_model)] if "lee_model" in cfg.wind else []
     return params
 
 
@@ -56,7 +57,21 @@ def test_the_sweeps_cover_backends_scenes_resolutions_seeds_and_references():
     assert fence_levels[-1] >= 2 * _resolutions(fence)[-1]
 
 
-@pytest.mark.parametrize("experiment", ["paper", "fence", "reference"])
+def test_the_mixing_lee_is_swept_where_the_papers_lee_is():
+    """paper_mixing and fence_mixing run the particles' mixing lee on the scenes, at the
+    resolutions and with the seeds that the paper's lee has in paper, paper_seeds, fence."""
+    paper, seeds, fence = _sweep("paper"), _sweep("paper_seeds"), _sweep("fence")
+    for mixing, lee in ((_sweep("paper_mixing"), paper), (_sweep("fence_mixing"), fence)):
+        assert mixing["wind"] == ["particles"] and mixing["wind.lee_model"] == ["mixing"]
+        assert set(mixing["scene"]) == set(lee["scene"])
+        assert _resolutions(mixing) == _resolutions(lee)
+    assert set(_sweep("paper_mixing")["seed"]) == {*paper["seed"], *seeds["seed"]}
+    assert set(_sweep("paper_mixing")["sim.dt"]) == set(seeds["sim.dt"])
+
+
+@pytest.mark.parametrize(
+    "experiment", ["paper", "fence", "reference", "paper_mixing", "fence_mixing"]
+)
 def test_every_run_of_the_sweeps_passes_the_run_checks(experiment):
     params = _sweep(experiment)
     dt = min(params["sim.dt"], key=float)  # the time step does not change what is checked

@@ -53,10 +53,11 @@ def project_vertex(bodies, margin, friction, x_prev, p, normal):
     """Move ``p`` (in place) out to ``margin`` from the bodies; friction against ``x_prev``.
 
     d = sdf(p) - margin < 0  ->  p += -d n;  tangential move dt limited by mu |d|.
+    Returns d (how far p lay outside the margin; negative: how deep it lay inside).
     """
     d = union_distance_point(bodies, p[0], p[1], p[2], normal) - margin
     if d >= 0.0:
-        return
+        return d
     for k in range(3):
         p[k] -= d * normal[k]
     # tangential displacement over the substep
@@ -77,6 +78,37 @@ def project_vertex(bodies, margin, friction, x_prev, p, normal):
         p[0] -= s * tx
         p[1] -= s * ty
         p[2] -= s * tz
+    return d
+
+
+# |grad sdf| of the union of the bodies is at most 1 for the analytic shapes and sqrt 3 for a
+# tabulated mesh inside its lattice (windbench.geometry.sdf; outside, the distance is that to
+# the lattice's box, PAD_CELLS spacings or more, beyond any contact); the clearance test
+# uses this bound.
+LIPSCHITZ = 2.0
+
+
+@njit(cache=True, inline="always")
+def contact_vertex(contacts, i, x_prev, p, normal, clear):
+    """:func:`project_vertex` for vertex ``i`` unless it cannot touch a body.
+
+    ``clear`` = (probe (n, 3), clearance (n,)): at ``probe[i]`` vertex i lay
+    ``clearance[i]`` outside the margin. The signed distance changes by at most
+    LIPSCHITZ |p - probe| between two points, so while ``LIPSCHITZ |p - probe[i]|`` is
+    smaller than the clearance the vertex is still outside the margin and the query is
+    skipped: the result is the same, without the distance query. A query records its
+    point and clearance (0 after a contact).
+    """
+    bodies, boxes, margin, friction = contacts
+    probe, clearance = clear
+    if not near_a_body(boxes, p[0], p[1], p[2]):
+        return
+    dx, dy, dz = p[0] - probe[i, 0], p[1] - probe[i, 1], p[2] - probe[i, 2]
+    if LIPSCHITZ * LIPSCHITZ * (dx * dx + dy * dy + dz * dz) < clearance[i] * clearance[i]:
+        return
+    d = project_vertex(bodies, margin, friction, x_prev, p, normal)
+    probe[i, 0], probe[i, 1], probe[i, 2] = p[0], p[1], p[2]
+    clearance[i] = max(d, 0.0)
 
 
 @njit(cache=True)

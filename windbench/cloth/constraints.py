@@ -264,6 +264,56 @@ def solve_chains(p, inv_mass, chain_ptr, chain_vert, rest, alpha, scale, lam, wo
     return solved
 
 
+@njit(cache=True, inline="always")
+def limit_edge(p, inv_mass, i, j, rest, limit, trigger2):
+    """Strain limit of one edge (Provot 1995): if it is longer than ``sqrt(trigger2) L``, bring
+    it to ``(1 + limit) L`` as a rigid constraint, ``dlambda = -C / (w_i + w_j)``. Returns
+    whether it moved the edge."""
+    dx, dy, dz = p[i, 0] - p[j, 0], p[i, 1] - p[j, 1], p[i, 2] - p[j, 2]
+    ln2 = dx * dx + dy * dy + dz * dz
+    w = inv_mass[i] + inv_mass[j]
+    if w == 0.0 or ln2 <= trigger2 * rest * rest:
+        return False
+    ln = math.sqrt(ln2)
+    s = ((1.0 + limit) * rest - ln) / (w * ln)
+    si, sj = inv_mass[i] * s, inv_mass[j] * s
+    p[i, 0] += si * dx
+    p[i, 1] += si * dy
+    p[i, 2] += si * dz
+    p[j, 0] -= sj * dx
+    p[j, 1] -= sj * dy
+    p[j, 2] -= sj * dz
+    return True
+
+
+@njit(cache=True)
+def limit_edges(p, inv_mass, edges, rest, first, last, limit, moved, stamps):
+    """One strain-limit pass edge by edge over ``edges[first:last]`` (:func:`limit_edge`, a
+    trigger of ``1 + (1 + LIMIT_SLACK) limit`` as for the chains), in place; the vertices it
+    moves are flagged in ``moved``. Returns how many edges it moved.
+
+    ``stamps`` = (per vertex, per edge, clock (1,)) int64: an edge remembers the clock of
+    its last test and a vertex the clock of its last move; an edge whose two vertices have
+    not moved since its test still keeps the limit and is not tested again (the same
+    result; an edge stamp of -1 forces the test)."""
+    trigger = 1.0 + (1.0 + LIMIT_SLACK) * limit
+    trigger2 = trigger * trigger
+    vertex_stamp, edge_stamp, clock = stamps
+    projected = 0
+    for e in range(first, last):
+        i, j = edges[e, 0], edges[e, 1]
+        tested = edge_stamp[e]
+        if tested >= 0 and vertex_stamp[i] < tested and vertex_stamp[j] < tested:
+            continue
+        clock[0] += 1
+        edge_stamp[e] = clock[0]
+        if limit_edge(p, inv_mass, i, j, rest[e], limit, trigger2):
+            projected += 1
+            moved[i] = moved[j] = True
+            vertex_stamp[i] = vertex_stamp[j] = clock[0]
+    return projected
+
+
 @njit(cache=True)
 def project_shear_edges(p, inv_mass, edges, rest, alpha, scale, lam, first):
     """One XPBD projection of each edge from ``first`` on (the shear edges), in order.
@@ -368,11 +418,15 @@ def damp_velocities(x, v, inv_mass, edges, edge_c, hinges, hinge_c, dt):
 
 
 @njit(cache=True)
-def max_edge_stretch(x, edges, rest):
-    """max_e |x_i - x_j| / L_e - 1 over the edges (i, j) of ``edges`` (as many as ``rest``)."""
+def edge_stretch(x, edges, rest, limit):
+    """(max_e |x_i - x_j| / L_e - 1, how many edges are longer than (1 + limit) L_e) over
+    the edges (i, j) of ``edges`` (as many as ``rest``)."""
     top = -np.inf
+    over = 0
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
         dx, dy, dz = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
-        top = max(top, math.sqrt(dx * dx + dy * dy + dz * dz) / rest[e] - 1.0)
-    return top
+        s = math.sqrt(dx * dx + dy * dy + dz * dz) / rest[e] - 1.0
+        top = max(top, s)
+        over += s > limit
+    return top, over

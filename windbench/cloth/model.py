@@ -104,5 +104,9 @@ class StaticCloth:
     def step(self, state: ClothState, external_forces: np.ndarray, dt: float) -> ClothState:
         return state
 
+    def mobility(self) -> np.ndarray:
+        """A static cloth does not yield to the air: 0 per vertex."""
+        return np.zeros(self.model.n_vertices)
+
     def stats(self, state: ClothState) -> dict[str, float]:
         return {}

@@ -19,8 +19,9 @@ substep
    hinges, the tethers to the pins;
 3. contacts: every free vertex is moved out to ``cloth.collision_margin`` from the bodies
    with Coulomb friction (:mod:`windbench.cloth.collision`); then up to
-   ``cloth.limit_passes`` strain-limit passes (warp/weft edges at most
-   ``1 + cloth.strain_limit`` times their rest length), each followed by the contacts;
+   ``cloth.limit_passes`` strain-limit passes (stretch edges at most ``1 + strain_limit``
+   times their rest length: a lattice's threads as chains, each pass followed by the
+   contacts; an irregular mesh's edges one by one, their contacts after the last pass);
 4. ``v = (p - x) / h``; ``x = p``;
 
 and after the last substep 5. Rayleigh damping of the constraint rates. A hinge whose own
@@ -48,11 +49,13 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from windbench.cloth.collision import body_boxes, max_penetration, near_a_body, project_vertex
+from windbench.cloth.collision import body_boxes, contact_vertex, max_penetration
 from windbench.cloth.constraints import (
+    LIMIT_SLACK,
     damp_velocities,
+    edge_stretch,
     hinge_weights,
-    max_edge_stretch,
+    limit_edges,
     project_hinges,
     project_shear_edges,
     project_tethers,
@@ -80,8 +83,10 @@ class Constraints(NamedTuple):
     edge_compliance: np.ndarray  # (E,) alpha = 1/k, m/N
     edge_damping: np.ndarray  # (E,) c = damping * k, N s/m
     n_stretch: int  # the first n_stretch edges are stretch edges
+    n_lattice: int  # the first n_lattice of them belong to lattice cloths
     chain_ptr: np.ndarray  # threads (solve_chains)
     chain_vert: np.ndarray
+    n_lattice_chains: int  # the chains of the lattice edges come first
     hinges: np.ndarray  # (H, 4) by colour
     hinge_rest: np.ndarray  # (H,) rad
     hinge_compliance: np.ndarray  # (H,)
@@ -151,30 +156,75 @@ def _distance_passes(c, frame, iterations, p, lam, chain_work):
 
 
 @njit(cache=True)
-def _contacts(contacts, inv_mass, p, xp, normal):
-    """Step 3: every free vertex inside a body's grown bounding box moved out to the margin
-    (:func:`~windbench.cloth.collision.project_vertex`, friction against its motion from
-    xp; ``normal`` (3,) work space)."""
-    bodies, boxes, margin, friction = contacts
+def _contacts(contacts, inv_mass, p, xp, normal, clear):
+    """Step 3: every free vertex that may touch a body moved out to the margin
+    (:func:`~windbench.cloth.collision.contact_vertex`, friction against its motion from
+    xp; ``normal`` (3,) work space, ``clear`` the clearances)."""
     for i in range(p.shape[0]):
-        if inv_mass[i] > 0.0 and near_a_body(boxes, p[i, 0], p[i, 1], p[i, 2]):
-            project_vertex(bodies, margin, friction, xp[i], p[i], normal)
+        if inv_mass[i] > 0.0:
+            contact_vertex(contacts, i, xp[i], p[i], normal, clear)
 
 
 @njit(cache=True)
-def _strain_limit(model, frame, p, xp, lam, chain_work, normal):
-    """Step 3b: limit passes over the threads, the contacts after each, until every
-    thread keeps the limit (at most ``limit_passes``)."""
+def _contacts_moved(contacts, inv_mass, p, xp, normal, clear, moved):
+    """The contacts of step 3 for the vertices flagged in ``moved`` alone (then unflagged)."""
+    for i in range(p.shape[0]):
+        if moved[i]:
+            moved[i] = False
+            if inv_mass[i] > 0.0:
+                contact_vertex(contacts, i, xp[i], p[i], normal, clear)
+
+
+@njit(cache=True)
+def _strain_limit(model, frame, p, xp, work, normal):
+    """Step 3b: strain-limit passes until every thread and edge keeps the limit (at most
+    ``limit_passes``): the threads of lattice cloths as chains
+    (:func:`~windbench.cloth.constraints.solve_chains`), all contacts again after each pass
+    that moved one; the edges of irregular cloths one by one
+    (:func:`~windbench.cloth.constraints.limit_edges`), the contacts of the vertices they
+    moved once after the last pass.
+
+    The limit is a projection that the contacts override and that stops after
+    ``limit_passes`` passes. On a lattice each pass solves whole threads and the pins'
+    tethers carry the load, so it holds. An irregular garment held by the bodies alone (no
+    pins) is limited edge by edge, each pass carrying a correction only a few edges far:
+    where the wind presses it on the body its largest stretch stays above the limit, by as
+    much as ``max_stretch`` and ``over_strain_limit`` (:meth:`XPBDCloth.stretch`) record."""
     c, s = model.constraints, model.settings
-    alpha, scale = frame.edge_alpha, frame.edge_scale
+    _, lam, chain_work, moved, clear, stamps = work
+    stamps[1][:] = -1  # every edge is tested in the first pass
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
+    ptr = c.chain_ptr[: c.n_lattice_chains + 1]
     for _ in range(s.limit_passes if s.strain_limit > 0.0 else 0):
-        ptr, vert, rest, limit = c.chain_ptr, c.chain_vert, c.edge_rest, s.strain_limit
-        solved = solve_chains(p, c.inv_mass, ptr, vert, rest, alpha, scale, lam, chain_work, limit)
-        if solved == 0:  # every thread kept it: nothing moved
+        solved = solve_chains(
+            p,
+            c.inv_mass,
+            ptr,
+            c.chain_vert,
+            c.edge_rest,
+            frame.edge_alpha,
+            frame.edge_scale,
+            lam,
+            chain_work,
+            s.strain_limit,
+        )
+        edges = limit_edges(
+            p,
+            c.inv_mass,
+            c.edges,
+            c.edge_rest,
+            c.n_lattice,
+            c.n_stretch,
+            s.strain_limit,
+            moved,
+            stamps,
+        )
+        if solved + edges == 0:  # every thread and edge kept it: nothing moved
             break
-        if has_bodies:  # the contacts again, so that they hold at the end
-            _contacts(model.contacts, c.inv_mass, p, xp, normal)
+        if has_bodies and solved > 0:  # the contacts again, so that they hold at the end
+            _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
+    if has_bodies and c.n_stretch > c.n_lattice:
+        _contacts_moved(model.contacts, c.inv_mass, p, xp, normal, clear, moved)
 
 
 @njit(cache=True)
@@ -204,7 +254,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     h = frame.dt / s.substeps
     inv_h = 1.0 / h
     p, vv = out
-    xp, lam, chain_work = work
+    xp, lam, chain_work, _, clear, _ = work
     xp[:] = x
     vv[:] = v
     normal = np.empty(3)
@@ -217,8 +267,8 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
             project_hinges(p, c.inv_mass, c.hinges, c.hinge_rest, frame.hinge_alpha)
         project_tethers(p, c.inv_mass, c.tether_anchor, c.tether_length)  # 2c.
         if has_bodies:  # 3. contacts
-            _contacts(model.contacts, c.inv_mass, p, xp, normal)
-        _strain_limit(model, frame, p, xp, lam, chain_work, normal)  # 3b.
+            _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
+        _strain_limit(model, frame, p, xp, work, normal)  # 3b.
         for i in range(x.shape[0]):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
                 vv[i, k] = (p[i, k] - xp[i, k]) * inv_h
@@ -343,52 +393,78 @@ def stiffness(model: ClothModel, topo, materials) -> Stiffness:
     )
 
 
-def solve_order(model: ClothModel, topo, path: np.ndarray, threads: bool):
-    """Gauss-Seidel order: (edge order, chain_ptr, chain_vert, hinge order, n_stretch).
+class SolveOrder(NamedTuple):
+    """Gauss-Seidel order of the constraints (:func:`solve_order`)."""
+
+    edges: np.ndarray  # (E,) lattice stretch, irregular stretch, shear edges
+    chain_ptr: np.ndarray  # chains of the stretch edges (solve_chains)
+    chain_vert: np.ndarray
+    hinges: np.ndarray  # (H,)
+    n_stretch: int
+    n_lattice: int  # the first n_lattice edges are stretch edges of lattice cloths ...
+    n_lattice_chains: int  # ... in this many chains
+
+
+def edge_chains(rest: np.ndarray, edges: np.ndarray, priority: np.ndarray, threads: bool):
+    """(order, ptr, vertices) of :func:`~windbench.cloth.topology.thread_chains`, or with
+    ``threads`` false one chain per edge in the given order."""
+    if threads:
+        return thread_chains(rest, edges, priority)
+    n = edges.shape[0]
+    vertices = np.empty(2 * n, dtype=np.int64)
+    vertices[0::2], vertices[1::2] = edges[:, 0], edges[:, 1]
+    return np.arange(n, dtype=np.int64), np.arange(n + 1, dtype=np.int64), vertices
+
+
+def solve_order(model: ClothModel, topo, path: np.ndarray, threads: bool) -> SolveOrder:
+    """Gauss-Seidel order of the edges and hinges.
 
     Outwards from the pins (``path``: each vertex's edge-path distance to its nearest pin,
     :func:`~windbench.cloth.topology.tethers`), so that one pass carries a pin's hold down
-    the cloth; stretch
-    edges first, as threads (:func:`~windbench.cloth.topology.thread_chains`) or, with
-    ``threads`` false, one chain per edge; within a band of equal distance from the pins
-    (one edge length wide) edges and hinges go by colour (consecutive constraints share no
-    vertex, :func:`~windbench.cloth.topology.colour_order`).
+    the cloth; the stretch edges of lattice cloths first, as threads
+    (:func:`~windbench.cloth.topology.thread_chains`) or, with ``threads`` false, one chain
+    per edge; then the edges of irregular cloths the same way, then the shear edges; within
+    a band of equal distance from the pins (one edge length wide) edges and hinges go by
+    colour (consecutive constraints share no vertex,
+    :func:`~windbench.cloth.topology.colour_order`).
     """
     step = topo.edge_length.min() if topo.edges.size else 1.0
     near_e, near_h = path[topo.edges].min(axis=1), path[topo.hinges].min(axis=1)
     band_e, band_h = (
         np.where(np.isfinite(d), np.round(d / step), -1).astype(np.int64) for d in (near_e, near_h)
     )
-    edge_order, _ = colour_order(
-        topo.edges, near_e, topo.edge_shear * (band_e.max(initial=0) + 2) + band_e
-    )
-    n_stretch = int(np.count_nonzero(~topo.edge_shear))
-    stretch = edge_order[:n_stretch]
-    if threads:
-        order, chain_ptr, chain_vert = thread_chains(
-            model.rest_positions, topo.edges[stretch], near_e[stretch]
+    kind = np.where(topo.edge_shear, 2, np.where(topo.edge_lattice, 0, 1))
+    edge_order, _ = colour_order(topo.edges, near_e, kind * (band_e.max(initial=0) + 2) + band_e)
+    n_lattice = int(np.count_nonzero(kind == 0))
+    n_stretch = n_lattice + int(np.count_nonzero(kind == 1))
+    orders, ptrs, verts = [], [np.zeros(1, np.int64)], []
+    for part in (edge_order[:n_lattice], edge_order[n_lattice:n_stretch]):
+        order, ptr, vert = edge_chains(
+            model.rest_positions, topo.edges[part], near_e[part], threads
         )
-        edge_order = np.concatenate([stretch[order], edge_order[n_stretch:]])
-    else:
-        chain_ptr = np.arange(n_stretch + 1, dtype=np.int64)
-        chain_vert = np.empty(2 * n_stretch, dtype=np.int64)
-        chain_vert[0::2] = topo.edges[stretch, 0]
-        chain_vert[1::2] = topo.edges[stretch, 1]
-    hinge_order, _ = colour_order(topo.hinges, near_h, band_h)
-    return edge_order, chain_ptr, chain_vert, hinge_order, n_stretch
+        orders.append(part[order])
+        ptrs.append(ptr[1:] + sum(o.size for o in orders[:-1]))
+        verts.append(vert)
+    return SolveOrder(
+        edges=np.concatenate([*orders, edge_order[n_stretch:]]),
+        chain_ptr=np.concatenate(ptrs),
+        chain_vert=np.concatenate(verts),
+        hinges=colour_order(topo.hinges, near_h, band_h)[0],
+        n_stretch=n_stretch,
+        n_lattice=n_lattice,
+        n_lattice_chains=len(ptrs[1]),
+    )
 
 
 def constraint_tables(model: ClothModel, topo, k: Stiffness, settings) -> Constraints:
     """The :class:`Constraints` of ``model`` in solve order (contiguous arrays)."""
     anchor, length, path = tethers(model.rest_positions, topo.edges, model.pinned)
-    edge_order, chain_ptr, chain_vert, hinge_order, n_stretch = solve_order(
-        model, topo, path, settings.threads
-    )
+    so = solve_order(model, topo, path, settings.threads)
 
     def ordered(a, order):
         return np.ascontiguousarray(a[order])
 
-    eo, ho = edge_order, hinge_order
+    eo, ho = so.edges, so.hinges
     return Constraints(
         mass=k.mass,
         inv_mass=k.inv_mass,
@@ -397,9 +473,11 @@ def constraint_tables(model: ClothModel, topo, k: Stiffness, settings) -> Constr
         edge_rest=ordered(topo.edge_length, eo),
         edge_compliance=ordered(_compliance(k.edge_k), eo),
         edge_damping=ordered(k.edge_damping, eo),
-        n_stretch=n_stretch,
-        chain_ptr=chain_ptr,
-        chain_vert=chain_vert,
+        n_stretch=so.n_stretch,
+        n_lattice=so.n_lattice,
+        chain_ptr=so.chain_ptr,
+        chain_vert=so.chain_vert,
+        n_lattice_chains=so.n_lattice_chains,
         hinges=ordered(topo.hinges, ho),
         hinge_rest=ordered(topo.hinge_angle, ho),
         hinge_compliance=ordered(_compliance(k.hinge_k), ho),
@@ -442,6 +520,9 @@ class Workspace:
     x: np.ndarray  # (n, 3)
     lam: np.ndarray  # (E,) XPBD multipliers
     chain: np.ndarray  # (n_stretch, 5) Thomas algorithm
+    moved: np.ndarray  # (n,) bool: vertices the edge-by-edge strain limit moved
+    clear: tuple  # contact clearances: probe (n, 3), clearance (n,)
+    stamps: tuple  # the strain limit's clocks (limit_edges): per vertex, per edge, clock (1,)
     frame: FrameConstants | None = None
 
 
@@ -451,7 +532,13 @@ class XPBDCloth:
     stats_units = {
         "kinetic_energy": ("kinetic energy of the cloth", "J"),
         "max_penetration": ("deepest penetration of a cloth vertex into a body", "m"),
-        "max_stretch": ("largest relative elongation of a warp/weft edge", "1"),
+        "max_stretch": ("largest relative elongation of a stretch edge", "1"),
+        "over_strain_limit": (
+            "fraction of stretch edges beyond the strain limit, longer than "
+            f"(1 + {1 + LIMIT_SLACK:g} cloth.strain_limit) times their rest length (contacts "
+            "override the limit; it stops after cloth.limit_passes passes)",
+            "1",
+        ),
     }
 
     @classmethod
@@ -464,7 +551,7 @@ class XPBDCloth:
         self.model = model
         self.settings = SolverSettings.from_params(params)
         self.materials = cloth_materials(model, params)
-        self.topology = build_topology(model.rest_positions, model.triangles)
+        self.topology = build_topology(model.rest_positions, model.triangles, model.triangle_cloth)
         self.stiffness = k = stiffness(model, self.topology, self.materials)  # mesh order
         self.stretch_edges = ~self.topology.edge_shear
         s = self.settings
@@ -480,7 +567,16 @@ class XPBDCloth:
         self.hinge_s = hinge_weights(rest, c.inv_mass, c.hinges)  # sum_q w_q |grad_q theta|^2
         n_e = self.topology.edges.shape[0]
         self.workspace = Workspace(
-            np.empty((model.n_vertices, 3)), np.empty(n_e), np.empty((c.n_stretch, 5))
+            np.empty((model.n_vertices, 3)),
+            np.empty(n_e),
+            np.empty((c.n_stretch, 5)),
+            np.zeros(model.n_vertices, dtype=np.bool_),
+            (np.zeros((model.n_vertices, 3)), np.zeros(model.n_vertices)),
+            (
+                np.full(model.n_vertices, -1, np.int64),
+                np.full(n_e, -1, np.int64),
+                np.zeros(1, np.int64),
+            ),
         )
 
     def frame_constants(self, dt: float) -> FrameConstants:
@@ -497,7 +593,9 @@ class XPBDCloth:
         frame = self.frame_constants(float(dt))
         out = (np.empty_like(x), np.empty_like(v))
         w = self.workspace
-        work, energy, finite = xpbd_frame(self.tables, frame, x, v, f, out, (w.x, w.lam, w.chain))
+        work, energy, finite = xpbd_frame(
+            self.tables, frame, x, v, f, out, (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps)
+        )
         frames = state.frames + 1
         if not finite:
             raise SimulationDiverged(frames, "cloth positions or velocities are not finite")
@@ -511,25 +609,41 @@ class XPBDCloth:
             )
         return ClothState(out[0], out[1], frames, work_in)
 
+    def mobility(self) -> np.ndarray:
+        """1 / (mass per area) of each vertex (m^2/kg): its lumped area over its mass, 0 for
+        a pinned vertex."""
+        return self.tables.constraints.inv_mass * self.topology.vertex_area
+
     def kinetic_energy(self, velocities) -> float:
         """1/2 sum m v^2 (J)."""
         m = self.tables.constraints.mass
         return 0.5 * float(np.sum(m * np.einsum("ij,ij->i", velocities, velocities)))
 
-    def max_stretch(self, positions) -> float:
-        """Largest relative elongation of a stretch (warp/weft) edge, |x_i - x_j| / L - 1."""
+    def stretch(self, positions) -> tuple[float, float]:
+        """(largest relative elongation |x_i - x_j| / L - 1 of a stretch edge (a lattice's
+        warp and weft, every edge of an irregular mesh), fraction of the stretch edges longer
+        than the strain limit lets them be, ``(1 + (1 + LIMIT_SLACK) cloth.strain_limit) L``)."""
         c = self.tables.constraints
         if c.n_stretch == 0:
-            return 0.0
+            return 0.0, 0.0
         x = np.ascontiguousarray(positions, np.float64)
-        return float(max_edge_stretch(x, c.edges[: c.n_stretch], c.edge_rest))
+        top, over = edge_stretch(
+            x, c.edges[: c.n_stretch], c.edge_rest, (1.0 + LIMIT_SLACK) * self.settings.strain_limit
+        )
+        return float(top), over / c.n_stretch
+
+    def max_stretch(self, positions) -> float:
+        """The largest relative elongation of a stretch edge (:meth:`stretch`)."""
+        return self.stretch(positions)[0]
 
     def stats(self, state: ClothState) -> dict[str, float]:
         """Figures recorded per step: kinetic energy (J), deepest body penetration (m),
-        largest stretch of a warp/weft edge (relative)."""
+        largest stretch of a stretch edge and the fraction beyond the strain limit."""
         bodies, boxes, _, _ = self.tables.contacts
+        top, over = self.stretch(state.positions)
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
             "max_penetration": max_penetration(bodies, boxes, state.positions),
-            "max_stretch": self.max_stretch(state.positions),
+            "max_stretch": top,
+            "over_strain_limit": over,
         }

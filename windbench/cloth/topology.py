@@ -2,10 +2,13 @@
 
 Pure numpy, computed once per model (the immutable part of the cloth solver):
 
-- every mesh edge is a distance constraint. An edge is a *shear* edge when it is the longest
-  edge of every triangle it bounds (the diagonal of a lattice cell, see
-  :func:`windbench.cloth.mesh.rectangle_triangles`); the others are *stretch* edges (the
-  warp and weft threads of the lattice);
+- every mesh edge is a distance constraint. A cloth is a *lattice* when each of its triangles
+  is right-angled opposite its longest side (half a rectangular cell, see
+  :func:`windbench.cloth.mesh.rectangle_triangles`); there an edge is a *shear* edge when it
+  is the longest edge of every triangle it bounds (a cell's diagonal), the others are
+  *stretch* edges (the warp and weft threads). Any other mesh (an irregular garment) has no
+  threads: every edge of it is a stretch edge, since its edges carry the membrane in all
+  directions;
 - every interior edge (two triangles) is a *hinge*: a dihedral-angle bending constraint on
   its four vertices ``(edge0, edge1, opposite in triangle A, opposite in triangle B)``;
 - a vertex carries a third of the mass of each triangle it belongs to (lumped mass).
@@ -39,6 +42,7 @@ class Topology:
     edge_length: np.ndarray  # (E,) rest length, m
     edge_area: np.ndarray  # (E,) total rest area of the triangles sharing the edge, m^2
     edge_shear: np.ndarray  # (E,) bool: diagonal (shear) edge
+    edge_lattice: np.ndarray  # (E,) bool: edge of a lattice cloth
     edge_triangle: np.ndarray  # (E,) one triangle of the edge (for per-cloth material)
     hinges: np.ndarray  # (H, 4) edge0, edge1, opposite A, opposite B
     hinge_angle: np.ndarray  # (H,) rest dihedral angle, rad
@@ -70,10 +74,39 @@ def dihedral_angles(positions: np.ndarray, hinges: np.ndarray) -> np.ndarray:
     return np.arctan2(sin, cos)
 
 
-def build_topology(rest: np.ndarray, triangles: np.ndarray) -> Topology:
-    """Edges, hinges and lumped vertex areas of a (possibly multi-component) mesh."""
+RIGHT_ANGLE_COS = 1e-6  # |cos| of a lattice triangle's angle opposite its longest side
+
+
+def lattice_triangles(rest: np.ndarray, triangles: np.ndarray, cloth: np.ndarray) -> np.ndarray:
+    """Whether each triangle belongs to a lattice cloth (``cloth``: its cloth's index): one
+    whose every triangle has a right angle opposite its longest side c,
+    ``|a^2 + b^2 - c^2| / (2 a b) <= RIGHT_ANGLE_COS`` (law of cosines)."""
+    if triangles.shape[0] == 0:
+        return np.zeros(0, bool)
+    side2 = np.stack(
+        [
+            np.sum((rest[triangles[:, (k + 1) % 3]] - rest[triangles[:, k]]) ** 2, axis=1)
+            for k in range(3)
+        ],
+        axis=1,
+    )
+    side2.sort(axis=1)
+    a2, b2, c2 = side2[:, 0], side2[:, 1], side2[:, 2]
+    right = np.abs(a2 + b2 - c2) <= RIGHT_ANGLE_COS * 2.0 * np.sqrt(a2 * b2)
+    irregular = np.bincount(cloth, weights=~right, minlength=int(cloth.max()) + 1) > 0
+    return ~irregular[cloth]
+
+
+def build_topology(
+    rest: np.ndarray, triangles: np.ndarray, cloth: np.ndarray | None = None
+) -> Topology:
+    """Edges, hinges and lumped vertex areas of a (possibly multi-component) mesh; ``cloth``
+    gives each triangle's cloth (default: all one cloth), which is a lattice or not as a
+    whole (:func:`lattice_triangles`)."""
     n = rest.shape[0]
     m = triangles.shape[0]
+    cloth = np.zeros(m, np.int64) if cloth is None else np.asarray(cloth, np.int64)
+    lattice = lattice_triangles(rest, triangles, cloth)
     areas = triangle_areas(rest, triangles)
     vertex_area = np.zeros(n)
     for k in range(3):
@@ -102,6 +135,7 @@ def build_topology(rest: np.ndarray, triangles: np.ndarray) -> Topology:
     )
     is_long = longest.reshape(-1)[order]
     shear = np.logical_and.reduceat(is_long, first) if len(first) else np.zeros(0, bool)
+    edge_lattice = lattice[tri[order][first]]
     # hinges: edges with two triangles
     two = np.flatnonzero(counts == 2)
     h0 = order[first[two]]
@@ -111,7 +145,8 @@ def build_topology(rest: np.ndarray, triangles: np.ndarray) -> Topology:
         edges=edges,
         edge_length=length,
         edge_area=edge_area,
-        edge_shear=shear.astype(bool),
+        edge_shear=shear.astype(bool) & edge_lattice,
+        edge_lattice=edge_lattice,
         edge_triangle=tri[order][first],
         hinges=hinges,
         hinge_angle=dihedral_angles(rest, hinges),

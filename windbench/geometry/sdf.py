@@ -105,11 +105,13 @@ def mesh_tables(vertices: np.ndarray, triangles: np.ndarray) -> MeshTables:
 
 @njit(cache=True, inline="always")
 def _dot(u, v):
+    """u . v of two 3-tuples."""
     return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
 @njit(cache=True, inline="always")
 def _along(a, s, u):
+    """The point a + s u on the line through a along u."""
     return (a[0] + s * u[0], a[1] + s * u[1], a[2] + s * u[2])
 
 

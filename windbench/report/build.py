@@ -111,12 +111,12 @@ def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
         "lee_force_ratio": "lee force ratio",
         "lee_speed_ratio": "lee speed ratio",
     }
-    d = df.copy()
+    d = C.with_backend(df)  # the particles' lee models apart
     d["seconds_per_step_median"] = d["seconds_per_step_median"] * 1e3
     d["wind_seconds_median"] = d["wind_seconds_median"] * 1e3
     if "is_reference" in d:  # the reference's own error (0) would dilute the mean
         d.loc[d["is_reference"].astype(bool), "lee_error"] = np.nan
-    g = d.groupby(["scene", "wind", "resolution"], sort=True)
+    g = d.groupby(["scene", "backend", "resolution"], sort=True)
     out = g[list(cols)].mean().rename(columns=cols)
     out.insert(0, "runs", g.size())
     out.insert(1, "cells", g["grid_cells"].first())
@@ -127,15 +127,15 @@ def lee_at_a_glance(df: pd.DataFrame) -> pd.DataFrame:
     """Per scene and backend, the finest run's lee speed ratio (and force ratio, if any)."""
     if df.empty:
         return df
-    d = df.sort_values(["resolution", "dt"], ascending=[False, True])
-    finest = d.groupby(["scene", "wind"], sort=True).head(1)
+    d = C.with_backend(df).sort_values(["resolution", "dt"], ascending=[False, True])
+    finest = d.groupby(["scene", "backend"], sort=True).head(1)
     rows = []
     for scene, g in finest.groupby("scene", sort=True):
         row = {"scene": scene}
         for _, r in g.iterrows():
-            row[f"{r['wind']} speed"] = r["lee_speed_ratio"]
+            row[f"{r['backend']} speed"] = r["lee_speed_ratio"]
             if np.isfinite(r.get("lee_force_ratio", np.nan)):
-                row[f"{r['wind']} force"] = r["lee_force_ratio"]
+                row[f"{r['backend']} force"] = r["lee_force_ratio"]
         rows.append(row)
     out = pd.DataFrame(rows)
     order = {w: i for i, w in enumerate(F.BACKEND_COLORS)}

@@ -77,6 +77,8 @@ FIGURES: dict[str, tuple[str, str | None]] = {
     "wind_seconds_median": ("median wall time of the wind phase per step, steady window", "s"),
     "seconds_per_simulated_second": ("median wall time per step / dt", "1"),
     "wall_cpu_ratio": ("median over the steps of wall time / process CPU time", "1"),
+    "cpu_seconds_per_simulated_second": ("median process CPU time per step / dt", "1"),
+    "threads": ("numba threads of the run", "1"),
     "load_average_peak": ("larger 1-minute load average of the run's start and end", "1"),
     "contended": ("the run shared its cores: its timings are not its own cost", "1"),
     "analysis_start": ("start of the steady window", "s"),
@@ -261,9 +263,10 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     else:
         figs["divergence_max"] = math.nan
     phases = {}
-    if "step_seconds" in ds and ds.sizes.get("time", 0):
+    n_times = ds.sizes.get("time", 0)
+    later = np.arange(n_times) >= 1 if n_times > 1 else np.ones(n_times, bool)
+    if "step_seconds" in ds and n_times:
         sec = np.asarray(ds["step_seconds"].values, dtype=float)
-        later = np.arange(sec.shape[0]) >= 1 if sec.shape[0] > 1 else np.ones(1, bool)
         steady = sec[later]
         in_window = sec[later & window] if (later & window).any() else steady
         for j, ph in enumerate(ds["phase"].values):
@@ -277,6 +280,8 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     figs["seconds_per_simulated_second"] = figs["seconds_per_step_median"] / float(
         ds.attrs.get("dt", math.nan)
     )
+    figs["cpu_seconds_per_simulated_second"] = _cpu_per_simulated_second(ds, later & window)
+    figs["threads"] = int(ds.attrs.get("numba_threads", 0))
     figs.update(contention(ds))
     shape = ds.attrs.get("grid_shape")
     shape = (
@@ -291,6 +296,16 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     figs["steps_completed"] = int(ds.attrs.get("steps_completed", ds.sizes.get("time", 0)))
     figs["steps_planned"] = int(ds.attrs.get("steps_planned", -1))
     return figs, phases
+
+
+def _cpu_per_simulated_second(ds: xr.Dataset, steps) -> float:
+    """Median process CPU time per step over ``steps`` (the steady window after the first
+    step) / dt: a one-thread run's own cost even when it shared its cores."""
+    if "step_cpu_seconds" not in ds or not ds.sizes.get("time", 0):
+        return math.nan
+    cpu = np.asarray(ds["step_cpu_seconds"].values, dtype=float)
+    chosen = cpu[steps] if np.any(steps) else cpu
+    return float(np.median(chosen)) / float(ds.attrs.get("dt", math.nan))
 
 
 def contention(ds: xr.Dataset) -> dict:
@@ -495,14 +510,20 @@ def _setting(rec: RunRecord, name: str):
 def swept_keys(records: Sequence[RunRecord]) -> list[str]:
     """The dimensions: :data:`SETTINGS`, then every other config key that all complete runs
     have and that takes more than one value among them (e.g. ``aero.lift_coefficient``).
-    A ``scene.*`` key counts only if it varies among runs of one scene (e.g. a swept
-    ``scene.cloths.0.resolution``): otherwise it follows from the scene's name."""
+    A ``wind.*`` key of one backend (e.g. the particles' ``wind.lee_model``) counts when it
+    takes more than one value among the runs that have it. A ``scene.*`` key counts only
+    if it varies among runs of one scene (e.g. a swept ``scene.cloths.0.resolution``):
+    otherwise it follows from the scene's name."""
     complete = [r for r in records if r.status in ("complete", "duplicate")]
     extra = []
     if complete:
         common = set(complete[0].config)
         for r in complete[1:]:
             common &= set(r.config)
+        backend_keys = {k for r in complete for k in r.config if k.startswith("wind.")} - common
+        for key in sorted(backend_keys):
+            if len({repr(r.config[key]) for r in complete if key in r.config}) > 1:
+                extra.append(key)
         for key in sorted(common):
             if key in SETTINGS.values() or key in IGNORED:
                 continue
@@ -541,6 +562,17 @@ def summary_frame(records: Sequence[RunRecord]) -> pd.DataFrame:
     return df[[c for c in front if c in df] + [c for c in df if c not in front]]
 
 
+def _netcdf_dims(df: pd.DataFrame, dims: Sequence[str]) -> None:
+    """Dimension columns as netCDF can hold them, in place: tuples (list-valued settings)
+    as text, and a backend's key that other backends' runs lack (None, NaN) as "" when its
+    values are text (e.g. ``wind.lee_model`` of a navier_stokes run)."""
+    for c in dims:
+        if df[c].map(lambda v: isinstance(v, tuple)).any():
+            df[c] = df[c].map(str)
+        if df[c].map(lambda v: isinstance(v, str)).any():
+            df[c] = df[c].where(df[c].notna(), "")
+
+
 def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     """Complete runs -> one dataset whose dimensions are the swept settings.
 
@@ -554,9 +586,7 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
         return xr.Dataset(attrs={"runs": 0})
     df = summary_frame(good)
     df = df.drop(columns=[c for c in df if c.startswith("step_seconds_")] + ["status", "failure"])
-    for c in dims:  # tuples (list-valued settings) are not netCDF values
-        if df[c].map(lambda v: isinstance(v, tuple)).any():
-            df[c] = df[c].map(str)
+    _netcdf_dims(df, dims)
     for c in df:  # flags as 0/1 so that a missing combination can be NaN
         if df[c].map(lambda v: isinstance(v, bool | np.bool_)).all():
             df[c] = df[c].astype(float)
@@ -568,9 +598,7 @@ def combine(records: Sequence[RunRecord]) -> xr.Dataset:
     ]
     if phase_rows:
         pf = pd.DataFrame(phase_rows)
-        for c in dims:
-            if pf[c].map(lambda v: isinstance(v, tuple)).any():
-                pf[c] = pf[c].map(str)
+        _netcdf_dims(pf, dims)
         ds = ds.merge(xr.Dataset.from_dataframe(pf.set_index([*dims, "phase"])))
         ds["step_seconds"].attrs.update(
             long_name="mean wall time per step (first step excluded)", units="s"

@@ -20,6 +20,9 @@ from windbench.report.figures import Drawn, Missing, _color, _figure, timed
 from windbench.report.lee import Reference
 
 COST_X = "seconds_per_simulated_second"
+CPU_X = "cpu_seconds_per_simulated_second"
+COST_LABEL = "s per simulated s"
+LEE_MODEL = "wind.lee_model"  # the particle backend's lee: paper | mixing
 RESOLUTION_MARKERS = "v<osD*Ph>"  # by rank of the resolutions in a table, coarsest first
 # Relative wind speed behind dense windbreaks (optical porosity < 20 %) at about half
 # their height, as summarised by Heisler & DeWalle (1988, Agric. Ecosyst. Environ.
@@ -31,12 +34,27 @@ SHELTER_SOURCE = "dense windbreaks, Heisler & DeWalle (1988), approximate range"
 SHELTER_HEIGHT = 0.5  # H: the height the range refers to
 
 
+def backend_label(wind, lee_model) -> str:
+    """The model a run stands for: the backend's name, ``particles/mixing`` for the particle
+    backend with its mixing lee (``particles`` alone is the paper's lee)."""
+    if wind == "particles" and isinstance(lee_model, str) and lee_model not in ("", "paper"):
+        return f"{wind}/{lee_model}"
+    return str(wind)
+
+
+def with_backend(df: pd.DataFrame) -> pd.DataFrame:
+    """df with a ``backend`` column (:func:`backend_label`) beside ``wind``."""
+    lee = df[LEE_MODEL] if LEE_MODEL in df else pd.Series(None, index=df.index, dtype=object)
+    return df.assign(backend=[backend_label(w, m) for w, m in zip(df["wind"], lee, strict=True)])
+
+
 def compared(df: pd.DataFrame) -> pd.DataFrame:
-    """Complete runs with a lee error that are not levels of their scene's reference."""
+    """Complete runs with a lee error that are not levels of their scene's reference, with
+    their ``backend`` (:func:`with_backend`)."""
     if df.empty or "lee_error" not in df:
-        return df.iloc[0:0]
+        return df.iloc[0:0].assign(backend=pd.Series(dtype=object))
     levels = df.get("reference_level", pd.Series(False, index=df.index)).astype(bool)
-    return df[~levels & np.isfinite(df["lee_error"].astype(float))]
+    return with_backend(df[~levels & np.isfinite(df["lee_error"].astype(float))])
 
 
 def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
@@ -49,22 +67,34 @@ def pareto_front(cost: np.ndarray, error: np.ndarray) -> np.ndarray:
     return front
 
 
+def own_cost(d: pd.DataFrame, contended: bool = False) -> pd.Series:
+    """Seconds per simulated second that are the run's own: the wall time of a run that had
+    its cores (:func:`~windbench.report.figures.timed`), else the process CPU time of a
+    one-thread run (what it takes on an idle core: it computed while it held one), else
+    NaN (a multi-thread run that shared its cores measured the sharing)."""
+    cost = pd.Series(np.nan, index=d.index)
+    kept = timed(d, contended).index
+    cost[kept] = d.loc[kept, COST_X]
+    if CPU_X in d and "threads" in d:
+        single = cost.isna() & (d["threads"] == 1)
+        cost[single] = d.loc[single, CPU_X]
+    return cost
+
+
 def accuracy_cost_table(df: pd.DataFrame, contended: bool = False) -> pd.DataFrame:
-    """Per scene, backend and resolution: cost per simulated second and lee error (seeds
-    and time steps: mean, with the seeds' spread), Pareto front marked per scene. The cost
-    is the median over the runs whose timings hold (:func:`~windbench.report.figures.timed`;
-    ``contended`` counts those left out of it, NaN cost where none is left)."""
+    """Per scene, backend (the particles' lee model told apart) and resolution: cost per
+    simulated second and lee error (seeds and time steps: mean, with the seeds' spread),
+    Pareto front marked per scene. The cost is the median of :func:`own_cost` over the
+    runs (``contended`` counts the runs that shared their cores and were timed by CPU)."""
     d = compared(df)
     if d.empty or COST_X not in d:
         return pd.DataFrame()
-    d = d.assign(timed_cost=np.nan)
-    kept = timed(d, contended).index
-    d.loc[kept, "timed_cost"] = d.loc[kept, COST_X]
-    keys = [k for k in ("scene", "wind", "resolution", "dt") if k in d]
+    d = d.assign(timed_cost=own_cost(d, contended))
+    keys = [k for k in ("scene", "backend", "resolution", "dt") if k in d]
     g = d.groupby(keys, sort=True)
     out = g.agg(
         runs=("lee_error", "size"),
-        contended=("timed_cost", lambda c: int(c.isna().sum())),
+        contended=("contended", lambda c: int(c.fillna(False).astype(bool).sum())),
         cost=("timed_cost", "median"),
         lee_error=("lee_error", "mean"),
         error_min=("lee_error", "min"),
@@ -77,7 +107,7 @@ def accuracy_cost_table(df: pd.DataFrame, contended: bool = False) -> pd.DataFra
         front = np.zeros(len(sub), dtype=bool)
         front[finite] = pareto_front(sub["cost"].values[finite], sub["lee_error"].values[finite])
         out.loc[idx, "pareto"] = front
-    return out.rename(columns={"cost": "wall s per simulated s"})
+    return out.rename(columns={"cost": COST_LABEL})
 
 
 def reference_table(refs: dict[str, Reference]) -> pd.DataFrame:
@@ -118,8 +148,9 @@ def window_table(records) -> pd.DataFrame:
         )
     if not rows:
         return pd.DataFrame()
-    d = pd.DataFrame(rows)
-    return d.groupby("scene", sort=True).agg(["min", "max"]).reset_index()
+    d = pd.DataFrame(rows).groupby("scene", sort=True).agg(["min", "max"])
+    d.columns = [f"{name} {stat}" for name, stat in d.columns]  # one header row
+    return d.reset_index()
 
 
 def _scene_panels(scenes):
@@ -130,9 +161,17 @@ def _scene_panels(scenes):
     return fig, [fig.add_subplot(rows, cols, i + 1) for i in range(len(scenes))]
 
 
-def _band(ax, ref: Reference | None):
-    if ref is not None and np.isfinite(ref.gci):
-        ax.axhspan(0, ref.gci, color="0.85", zorder=0)
+def _band(ax, ref: Reference | None, errors) -> None:
+    """The reference's GCI as a grey band from 0; a band above the panel's errors is cut at
+    1.2x the largest and labelled with its value, so that the points stay readable."""
+    if ref is None or not np.isfinite(ref.gci):
+        return
+    top = 1.2 * float(np.nanmax(errors)) if len(errors) else ref.gci
+    ax.axhspan(0, min(ref.gci, top), color="0.85", zorder=0)
+    if ref.gci > top:
+        ax.set_ylim(0, top)
+        ax.text(0.02, 0.97, f"GCI = {ref.gci:.3g} (off the scale): not converged",
+                transform=ax.transAxes, va="top", fontsize=7)  # fmt: skip
 
 
 def _legend_below(fig, handles_axes):
@@ -145,7 +184,8 @@ def _legend_below(fig, handles_axes):
 
 
 def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missing:
-    """x: wall time per simulated second, y: lee error, one panel per scene; Pareto front."""
+    """x: own time per simulated second (:func:`own_cost`), y: lee error, one panel per
+    scene; Pareto front."""
     title = "Accuracy against cost"
     if table.empty:
         return Missing("accuracy_vs_cost", title, "runs with a lee error and a reference")
@@ -154,23 +194,23 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
     markers = dict(zip(sorted(table["resolution"].unique()), RESOLUTION_MARKERS, strict=False))
     for ax, scene in zip(axes, scenes, strict=True):
         sub = table[table["scene"] == scene]
-        _band(ax, refs.get(scene))
+        _band(ax, refs.get(scene), sub["error_max"].to_numpy())
         for _, r in sub.iterrows():
             ax.errorbar(
-                r["wall s per simulated s"],
+                r[COST_LABEL],
                 r["lee_error"],
                 yerr=[[r["lee_error"] - r["error_min"]], [r["error_max"] - r["lee_error"]]],
                 fmt=markers.get(r["resolution"], "o"),
-                color=_color(r["wind"]),
+                color=_color(r["backend"]),
                 ms=5,
-                label=r["wind"],
+                label=r["backend"],
             )
-        front = sub[sub["pareto"]].sort_values("wall s per simulated s")
-        ax.plot(front["wall s per simulated s"], front["lee_error"], "k--", lw=0.8)
+        front = sub[sub["pareto"]].sort_values(COST_LABEL)
+        ax.plot(front[COST_LABEL], front["lee_error"], "k--", lw=0.8)
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(scene, fontsize=9)
-        ax.set_xlabel("wall s per simulated s")
+        ax.set_xlabel(COST_LABEL)
         ax.set_ylabel("lee error / U")
         ax.grid(True, which="both", alpha=0.3)
     for res, marker in markers.items():
@@ -178,8 +218,9 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
     axes[0].plot([], [], "k--", lw=0.8, label="Pareto front")
     _legend_below(fig, axes)
     caption = (
-        "Every backend and resolution as a point: wall time per simulated second (median "
-        "step over the steady window, divided by dt) against the lee error (RMS wind "
+        "Every backend and resolution as a point: its own time per simulated second (median "
+        "step over the steady window, divided by dt: wall time, or for a one-thread run that "
+        "shared its cores its CPU time, see the table's contended column) against the lee error (RMS wind "
         "difference in the lee box against the scene's reference, over U_ref); error bars "
         "span the seeds; the dashed line joins the Pareto front (no point is both cheaper "
         "and more accurate); the grey band is the reference's own uncertainty (GCI): an "
@@ -197,16 +238,16 @@ def fig_lee_error(df: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missi
     scenes = sorted(d["scene"].unique())
     fig, axes = _scene_panels(scenes)
     for ax, scene in zip(axes, scenes, strict=True):
-        _band(ax, refs.get(scene))
-        for wind, g in d[d["scene"] == scene].groupby("wind", sort=True):
+        _band(ax, refs.get(scene), d.loc[d["scene"] == scene, "lee_error"].to_numpy())
+        for backend, g in d[d["scene"] == scene].groupby("backend", sort=True):
             s = g.groupby("resolution")["lee_error"].agg(["mean", "min", "max"])
             ax.errorbar(
                 s.index,
                 s["mean"],
                 yerr=[s["mean"] - s["min"], s["max"] - s["mean"]],
                 marker="o",
-                color=_color(wind),
-                label=wind,
+                color=_color(backend),
+                label=backend,
                 capsize=2,
             )
         ax.set_xscale("log", base=2)
@@ -235,7 +276,11 @@ def wake_frame(records, refs: dict[str, Reference]) -> pd.DataFrame:
     for rec in [*records, *(ref.run for ref in refs.values())]:
         if rec.status != "complete" or rec.wake is None:
             continue
-        label = "reference" if rec.path in ref_paths else rec.settings.get("wind")
+        label = (
+            "reference"
+            if rec.path in ref_paths
+            else backend_label(rec.settings.get("wind"), rec.config.get(LEE_MODEL))
+        )
         key = (rec.settings.get("scene"), label)
         best = finest.get(key)
         if best is None or int(rec.settings.get("resolution") or 0) > int(

@@ -45,7 +45,12 @@ from windbench.report.frames import (
 from windbench.scenes import Scene, build_scene
 from windbench.wind.primitives import superpose
 
-BACKEND_COLORS = {"global": "tab:blue", "particles": "tab:orange", "navier_stokes": "tab:green"}
+BACKEND_COLORS = {
+    "global": "tab:blue",
+    "particles": "tab:orange",
+    "particles/mixing": "tab:red",
+    "navier_stokes": "tab:green",
+}
 MARKERS = "osD^v<>ph*"
 LINESTYLES = ("-", "--", ":", "-.")
 SNAPSHOT_FRAMES = 4  # cloth frames in Fig. 3

@@ -9,6 +9,8 @@
 - ``stats() -> dict`` — scalar figures of the last step (recorded per time step); the class
   table ``stats_units`` gives each figure's long_name and units for the dataset.
 - ``solid_mask() -> (nx, ny, nz) bool`` — cells that are not air (inside rigid bodies).
+- ``cloth_pressure_loads() -> (m, 3) | None`` — pressure force over rho per cloth triangle,
+  where the backend couples through pressure.
 
 Model (scene, grid, params: fixed) is kept apart from state (arrays that change).
 """
@@ -30,13 +32,16 @@ class Obstacles:
     """What the air must react to this step: rigid bodies and the current cloth.
 
     Cloth arrays are all cloths concatenated: ``cloth_positions``/``cloth_velocities``
-    ``(n, 3)``, ``cloth_triangles`` ``(m, 3)`` indexing them.
+    ``(n, 3)``, ``cloth_triangles`` ``(m, 3)`` indexing them; ``cloth_mobility`` ``(n,)``
+    (1/m, None: all 0) is the air density over each vertex's mass per area, 0 where the
+    cloth cannot move (pinned, or a static cloth): how far the air's pressure moves it.
     """
 
     bodies: tuple[Body, ...]
     cloth_positions: np.ndarray
     cloth_velocities: np.ndarray
     cloth_triangles: np.ndarray
+    cloth_mobility: np.ndarray | None = None
 
     @classmethod
     def rigid_only(cls, bodies) -> Obstacles:
@@ -89,6 +94,12 @@ class WindField(ABC):
         None (the default) lets the loop take central differences of ``velocity()``;
         a solver on a staggered grid returns the divergence its projection controls.
         """
+        return None
+
+    def cloth_pressure_loads(self) -> np.ndarray | None:
+        """Force over the air density on each cloth triangle from the air's own pressure
+        (m^4 s^-2), for a backend whose solve closes the cloth (two-way coupling through
+        pressure); None (the default): the cloth feels the paper's §3 law."""
         return None
 
     def solid_mask(self) -> np.ndarray:

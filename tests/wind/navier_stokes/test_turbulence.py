@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from windbench.wind import surface_layer
 from windbench.wind.navier_stokes import trapezoid, turbulence
 from windbench.wind.navier_stokes.boundaries import padded_shape
 
@@ -49,9 +50,9 @@ def test_uniform_eddy_viscosity_is_the_laplacian_times_nu():
 
 def test_blackadar_mixing_length_limits():
     z = (np.arange(4000) + 0.5) * 0.01
-    length = turbulence.blackadar_length(z, 5.0)
-    assert length[0] == pytest.approx(turbulence.KARMAN * z[0], rel=1e-3)
-    assert length[-1] == pytest.approx(1.0 / (1.0 / (turbulence.KARMAN * z[-1]) + 0.2))
+    length = surface_layer.blackadar_length(z, 5.0)
+    assert length[0] == pytest.approx(surface_layer.KARMAN * z[0], rel=1e-3)
+    assert length[-1] == pytest.approx(1.0 / (1.0 / (surface_layer.KARMAN * z[-1]) + 0.2))
     assert np.all(np.diff(length) > 0) and length[-1] < 5.0
 
 
@@ -59,9 +60,9 @@ def test_surface_layer_viscosity_of_a_log_law_is_kappa_ustar_z():
     """Over u(z) = (u*/kappa) ln(z/z0), with l = kappa z (lambda far above), the
     equilibrium eddy viscosity is K = kappa u* z."""
     ustar, z = 0.4, np.array([0.5, 1.0, 2.0, 5.0])
-    shear = ustar / (turbulence.KARMAN * z)
-    k = turbulence.surface_layer_viscosity(z, shear, limit=1e12)
-    np.testing.assert_allclose(k, turbulence.KARMAN * ustar * z, rtol=1e-9)
+    shear = ustar / (surface_layer.KARMAN * z)
+    k = surface_layer.surface_layer_viscosity(z, shear, limit=1e12)
+    np.testing.assert_allclose(k, surface_layer.KARMAN * ustar * z, rtol=1e-9)
 
 
 def test_the_backend_takes_k_from_its_sources_profile_and_none_from_a_uniform_wind():
@@ -78,9 +79,9 @@ def test_the_backend_takes_k_from_its_sources_profile_and_none_from_a_uniform_wi
 
     fence, setup = nu_t("fence", 48)
     z = setup.grid.axes()[2]
-    ustar = turbulence.KARMAN * 6.0 / np.log(10.0 / 0.1)  # the fence's log law
-    expected = turbulence.blackadar_length(z, 40.0) * ustar / (turbulence.KARMAN * z)
-    expected = turbulence.blackadar_length(z, 40.0) * expected  # l^2 |dU/dz|
+    ustar = surface_layer.KARMAN * 6.0 / np.log(10.0 / 0.1)  # the fence's log law
+    expected = surface_layer.blackadar_length(z, 40.0) * ustar / (surface_layer.KARMAN * z)
+    expected = surface_layer.blackadar_length(z, 40.0) * expected  # l^2 |dU/dz|
     column = fence.nu_t[1, 1, :]  # upwind of the fence: air in every layer
     np.testing.assert_allclose(column, expected, rtol=1e-4)
     assert fence.nu_t[fence.solid.astype(bool)].max() == 0.0

@@ -24,8 +24,8 @@ velocities. ``velocity()`` returns cell-centred values (the mean of two faces, z
 solid cells), which ``sample()`` interpolates trilinearly like every other backend.
 
 Boundaries (:mod:`.boundaries`): inflow faces take the superposed sources (a uniform
-source only where it blows in, with its inflow ``turbulence`` if it has one:
-:mod:`windbench.wind.fluctuation`); a domain without an outflow face whose inflow carries
+source only where it blows in, with its inflow ``turbulence`` if it has one and its
+``gusts`` envelope: :mod:`windbench.wind.envelope`); a domain without an outflow face whose inflow carries
 a net volume flux turns its inflow faces into openings (pressure zero). The initial
 field is the superposed sources, zero at bodies, projected. Cells whose centre lies in a
 rigid body are solid: every face touching one has zero velocity (the paper's interior
@@ -49,8 +49,9 @@ import numpy as np
 
 from windbench.errors import ConfigError
 from windbench.geometry.raster import triangle_cells
+from windbench.wind import surface_layer
 from windbench.wind.base import Obstacles, WindField
-from windbench.wind.fluctuation import Fluctuation
+from windbench.wind.envelope import SourceTimes
 from windbench.wind.navier_stokes import (
     advection,
     boundaries,
@@ -80,6 +81,7 @@ from windbench.wind.navier_stokes.projection import (
 )
 from windbench.wind.primitives import parameter_table, profile_scale, superpose
 from windbench.wind.registry import WindConfig, register_backend
+from windbench.wind.surface_layer import MIXING_LENGTH_LIMIT
 
 ADVECTION = ("semi_lagrangian", "maccormack", "second_order")
 PRECISION = ("float64", "float32")
@@ -106,7 +108,7 @@ class NavierStokesConfig(WindConfig):
     body_force: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # m/s^2
     turbulence: str = "mixing_length"  # none | smagorinsky | mixing_length (eddy viscosity)
     smagorinsky_constant: float = 0.17  # C_s of nu_t = (C_s h)^2 |S|
-    mixing_length_limit: float = 40.0  # m, lambda of Blackadar's 1/l = 1/(kappa z) + 1/lambda
+    mixing_length_limit: float = MIXING_LENGTH_LIMIT  # m, Blackadar's lambda
     seed: int = 0  # synthetic inflow turbulence (conf/wind/navier_stokes.yaml sets ${seed})
     # float64 | float32: storage of the velocity, its scratch and the pressure solve's
     # vectors (the pressure itself, the arithmetic and every sum stay float64)
@@ -120,6 +122,12 @@ def _check(params):
     name = str(params.get("coupling"))
     if name not in COUPLING:
         raise ConfigError("wind.coupling", f"must be one of {list(COUPLING)}, got {name!r}")
+    if name == "projection" and str(params.get("advection")) == "second_order":
+        raise ConfigError(
+            "wind.coupling",
+            "projection works with wind.advection semi_lagrangian or maccormack, not "
+            "second_order (its projection carries half the pressure to the next step)",
+        )
     name = str(params.get("precision"))
     if name not in PRECISION:
         raise ConfigError("wind.precision", f"must be one of {list(PRECISION)}, got {name!r}")
@@ -188,10 +196,9 @@ class NavierStokesWind(WindField):
         self.relaxation = float(params.source_relaxation)
         self.turbulence = str(params.turbulence)
         self.time = 0.0
+        self.times = SourceTimes.build(scene, params.seed)  # gusts and fluctuations
         self.fluctuations = [
-            (s, Fluctuation.build(*s.turbulence, s.velocity, int(params.seed) + i))
-            for i, s in enumerate(scene.sources)
-            if s.turbulence is not None
+            (s, f) for s, f in zip(scene.sources, self.times.fluctuations, strict=True) if f
         ]
         self.body_force = np.asarray(list(params.body_force), dtype=float)
         shape = grid.shape
@@ -247,7 +254,9 @@ class NavierStokesWind(WindField):
         self._u_cell = np.zeros((*shape, 3))
         self._cell_valid = False
         self._stats: dict[str, float] = {}
-        self._blocked = None
+        self._blocked = None  # (rows, velocities, weights) of the faces the cloth closes
+        self._pockets = (np.full(shape, -1, np.int64), 0)  # air the cloth encloses
+        self._loads = None  # pressure force / rho on each cloth triangle
         self._initial_condition(scene)
 
     # ------------------------------------------------------------ set-up helpers
@@ -275,6 +284,9 @@ class NavierStokesWind(WindField):
         b = face // 2
         n_out = -1.0 if face % 2 == 0 else 1.0
         chosen = [s for s in self.scene.sources if s.kind != "uniform" or s.velocity[b] * n_out < 0]
+        if self.times.gusty:
+            index = [i for i, s in enumerate(self.scene.sources) if s in chosen]
+            return self.times.wind(points, self.time, index)  # gusts: e_i(t) (w_i + u'_i)
         wind = superpose(chosen, points)
         for source, fluctuation in self.fluctuations:
             if source in chosen:
@@ -345,7 +357,7 @@ class NavierStokesWind(WindField):
             self.q[a].reshape(-1)[self.solid_faces[a]] = 0.0
             boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], set_normal)
         if self._blocked is not None and len(self._blocked[0]):
-            rows, vals = self._blocked
+            rows, vals, _ = self._blocked
             coupling.apply_blocked(rows, vals, *self.q, *self.free)
 
     def _fill(self, arrays):
@@ -425,24 +437,20 @@ class NavierStokesWind(WindField):
 
     def _eddy_viscosity_model(self, limit: float) -> np.ndarray | None:
         """nu_t per cell: fixed for ``mixing_length`` (the undisturbed wind's shear at each
-        layer, :func:`.turbulence.surface_layer_viscosity`), updated every step for
+        layer, :func:`windbench.wind.surface_layer.surface_layer_viscosity`), updated every step for
         ``smagorinsky``, None without turbulence or where the wind has no shear."""
         if self.turbulence == "none":
             return None
         if self.turbulence == "smagorinsky":
             return np.zeros(self.grid.shape)
-        z = self.grid.axes()[2] - self.lower[2]
-        eps = 1e-3 * self.h
-        column = np.zeros((len(z), 3))
-        column[:, 2] = self.grid.axes()[2]
-        column[:, :2] = 0.5 * (self.lower[:2] + np.asarray(self.grid.upper)[:2])
-        up, down = column.copy(), column.copy()
-        up[:, 2] += eps
-        down[:, 2] -= eps
-        shear = np.linalg.norm(
-            superpose(self.scene.sources, up) - superpose(self.scene.sources, down), axis=1
-        ) / (2 * eps)
-        layers = turbulence.surface_layer_viscosity(z, shear, limit)
+        layers = surface_layer.sources_viscosity(
+            self.scene.sources,
+            self.grid.axes()[2],
+            self.lower,
+            self.grid.upper,
+            limit,
+            1e-3 * self.h,
+        )
         if not np.any(layers > 0):
             return None
         return np.where(self.solid.astype(bool), 0.0, layers[None, None, :])
@@ -538,6 +546,8 @@ class NavierStokesWind(WindField):
     def _project(self):
         face_flux(*self.q, self.target, self.rhs)
         np.negative(self.rhs, out=self.rhs)  # A psi = -(h div u - target)
+        if self._pockets[1]:  # air enclosed by cloth: its right-hand side must sum to 0
+            coupling.balance_pockets(self.rhs, *self._pockets)
         atol = 1e-14 * self.scene.reference_speed * np.sqrt(self.grid.n_cells)
         iters, res = self.poisson.solve(
             self.psi, self.rhs, self.tol, self.max_iterations, atol=atol
@@ -545,13 +555,18 @@ class NavierStokesWind(WindField):
         rhs_norm = self.poisson.rhs_norm  # ||rhs||_2, computed by the solve
         for a in range(3):
             subtract_gradient(self.q[a], a, self.psi, self.free[a], self.periodic)
+        if self._blocked is not None:  # the cloth yields to the pressure jump
+            rows, _, weight = self._blocked
+            coupling.move_membranes(rows, weight, self.psi, self.periodic, *self.q)
+        for a in range(3):
             boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], False)
         self._cell_valid = False
         return iters, res, rhs_norm
 
     def _couple(self, obstacles: Obstacles):
         """Paper §4.1.2 (``paper``/``projection``): act on the air where the cloth is."""
-        self._blocked = None
+        self._blocked, self._loads = None, None
+        self._pockets = (self._pockets[0], 0)
         tris = obstacles.cloth_triangles
         if self.coupling == "none" or tris is None or len(tris) == 0:
             return 0
@@ -574,9 +589,13 @@ class NavierStokesWind(WindField):
             )
         self.q, self.work = self.work, self.q
         if self.coupling == "projection":
-            rows, vals = coupling.blocked_faces(
+            mobility = obstacles.cloth_mobility
+            if mobility is None:
+                mobility = np.zeros(pos.shape[0])
+            rows, vals, weight = coupling.blocked_faces(
                 pos,
                 vel,
+                np.ascontiguousarray(mobility, dtype=np.float64),
                 tris,
                 start,
                 items,
@@ -584,20 +603,50 @@ class NavierStokesWind(WindField):
                 self.h,
                 np.asarray(self.grid.shape, dtype=np.int64),
             )
-            self._blocked = (rows, vals)
+            self._blocked = (rows, vals, weight)
             for a in range(3):
                 self.free[a][...] = self.free_static[a]
         self._apply_boundaries(set_normal=True)
         if self.coupling == "projection":
-            self._set_weights()
+            self._set_membrane_weights(rows, weight)
         return m
+
+    def _set_membrane_weights(self, rows, weight):
+        """The Poisson weights with the cloth's faces (:func:`.coupling.move_membranes`) and
+        the pockets of air that closed faces enclose (:func:`.coupling.pockets`)."""
+        for a in range(3):
+            face_weights(self.free[a], a, self.periodic, self.weights[a])
+        coupling.membrane_weights(rows, weight, *self.weights)
+        self.poisson.set_weights(*self.weights)
+        joined = [f.copy() for f in self.free]
+        coupling.open_membranes(rows, weight, *joined)
+        self._pockets = coupling.pockets(*joined, self.solid, self.periodic)
+
+    def _pressure_loads(self, dt: float, obstacles: Obstacles) -> None:
+        """Pressure force over rho on each cloth triangle
+        (:func:`.coupling.triangle_pressure_loads`): p / rho = psi h / dt, psi holding
+        dt grad p (``projection`` runs with the first-order schemes only)."""
+        self._loads = coupling.triangle_pressure_loads(
+            np.ascontiguousarray(obstacles.cloth_positions, dtype=np.float64),
+            np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64),
+            self.psi,
+            self.solid,
+            self.lower,
+            self.h,
+            self.h / dt,
+        )
+
+    def cloth_pressure_loads(self) -> np.ndarray | None:
+        """``projection`` coupling: the pressure force over the air density on each cloth
+        triangle in the last step (m^4 s^-2), else None."""
+        return self._loads
 
     # ------------------------------------------------------------ interface
 
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
         self.time += dt
-        if self.fluctuations:  # the inflow of this step's end
+        if self.times.varies:  # the inflow of this step's end
             self.planes = self._boundary_planes()
         marked = self._couple(obstacles)
         self._forces(dt)
@@ -613,6 +662,8 @@ class NavierStokesWind(WindField):
             sweeps = self._diffuse(dt)
             t3 = time.perf_counter()
         iters, res, rhs_norm = self._project()
+        if self._blocked is not None:
+            self._pressure_loads(dt, obstacles)
         t4 = time.perf_counter()
         peak, squares, count = divergence_norms(*self.q, self.target, self.solid)
         scale = 1.0 / self.scene.reference_speed  # h div u / U_ref

@@ -8,9 +8,18 @@
   The cloth's own velocity is kept (the paper's Neumann condition u . n = 0 for a cloth
   at rest, generalised to a moving one).
 - ``projection``: in addition, every grid face whose centre-to-centre segment crosses a
-  cloth triangle (:func:`windbench.geometry.raster.segment_triangle`) is closed in the
-  pressure projection, its normal velocity prescribed to the cloth's normal velocity
-  ((v . n) n_a): a moving, impermeable wall, so that air cannot pass through the flag.
+  cloth triangle (:func:`windbench.geometry.raster.segment_triangle`) is a face of the
+  cloth in the pressure projection: its velocity starts at the cloth's normal velocity
+  ((v . n) n_a) and yields to the pressure jump as the cloth's mass per area lets it
+  (:func:`move_membranes`; pinned or static cloth is an impermeable wall), so that air
+  cannot pass through the flag and the solve holds the air's reaction to the cloth's
+  motion within the step. The air acts back on the cloth through the projection's own
+  pressure: each triangle carries the jump ``(p_- - p_+) A n`` across it
+  (:func:`triangle_pressure_loads`). Air enclosed by walls of cloth (a pocket:
+  :func:`pockets`) keeps its volume only if their velocities add up to zero around it,
+  which faceted motion does not guarantee: the projection's right-hand side loses its
+  mean over each pocket (:func:`balance_pockets`), so that the Poisson problem stays
+  solvable.
 - ``none``: the cloth does not act on the air (one-way coupling).
 """
 
@@ -22,6 +31,7 @@ from numba import njit, prange
 from windbench.geometry.raster import segment_triangle
 from windbench.wind.navier_stokes.advection import at_face
 from windbench.wind.navier_stokes.boundaries import cells_beside
+from windbench.wind.navier_stokes.projection import psi_difference
 
 
 @njit(cache=True)
@@ -106,14 +116,16 @@ def remove_normal_component(q, a, u, v, w, index, normals, velocity, out):
 
 
 @njit(cache=True)
-def blocked_faces(positions, velocities, triangles, start, items, lower, h, shape):
-    """Faces crossed by cloth: rows (component, I, J, K) of padded indices and their
-    prescribed normal velocity (v . n) n_a of the first triangle that crosses the segment
-    between the two cell centres beside the face."""
+def blocked_faces(positions, velocities, mobility, triangles, start, items, lower, h, shape):
+    """Faces crossed by cloth: rows (component, I, J, K) of padded indices, their normal
+    velocity (v . n) n_a and their Poisson weight h x the mean ``mobility`` of the corners
+    (:func:`move_membranes`) of the first triangle that crosses the segment between the
+    two cell centres beside the face."""
     nx, ny, nz = shape[0], shape[1], shape[2]
     n_cells = nx * ny * nz
     rows = np.zeros((6 * (start[n_cells] + 1), 4), dtype=np.int64)
     vals = np.zeros(6 * (start[n_cells] + 1))
+    weight = np.zeros(6 * (start[n_cells] + 1))
     count = 0
     p0 = np.empty(3)
     p1 = np.empty(3)
@@ -173,8 +185,10 @@ def blocked_faces(positions, velocities, triangles, start, items, lower, h, shap
                 rows[count, 2] = max(j, j2) + 1 if a == 1 else j + 1
                 rows[count, 3] = max(k, k2) + 1 if a == 2 else k + 1
                 vals[count] = vn * n[a]
+                tri = triangles[hit]
+                weight[count] = h * (mobility[tri[0]] + mobility[tri[1]] + mobility[tri[2]]) / 3
                 count += 1
-    return rows[:count], vals[:count]
+    return rows[:count], vals[:count], weight[:count]
 
 
 @njit(cache=True)
@@ -191,3 +205,181 @@ def apply_blocked(rows, vals, u, v, w, fu, fv, fw):
         else:
             w[I, J, K] = vals[r]
             fw[I, J, K] = 0
+
+
+@njit(cache=True)
+def _root(parent, c):
+    """Root of cell c in the union-find forest ``parent`` (path halving)."""
+    while parent[c] != c:
+        parent[c] = parent[parent[c]]
+        c = parent[c]
+    return c
+
+
+@njit(cache=True)
+def pockets(free_u, free_v, free_w, solid, periodic):
+    """(label per cell, count): cells joined by open faces (free = 1) into regions; a region
+    with an open domain face (outflow or opening: pressure 0 there) or a solid cell is not
+    a pocket (-1), the others are numbered 0 .. count - 1 (union-find over the faces; a
+    face of a ``periodic`` axis joins the cells across the wrap)."""
+    nx, ny, nz = solid.shape
+    n = nx * ny * nz
+    parent = np.arange(n)
+    vented = np.zeros(n, dtype=np.bool_)
+    free = (free_u, free_v, free_w)
+    for a in range(3):
+        f = free[a]
+        for I in range(1, f.shape[0] - 1):
+            for J in range(1, f.shape[1] - 1):
+                for K in range(1, f.shape[2] - 1):
+                    if f[I, J, K] == 0:
+                        continue
+                    ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
+                    if periodic[a]:
+                        ip, jp, kp = ip % nx, jp % ny, kp % nz
+                        im, jm, km = im % nx, jm % ny, km % nz
+                    inside_p = ip < nx and jp < ny and kp < nz
+                    inside_m = im >= 0 and jm >= 0 and km >= 0
+                    if inside_p and inside_m:
+                        ra = _root(parent, (ip * ny + jp) * nz + kp)
+                        rb = _root(parent, (im * ny + jm) * nz + km)
+                        parent[ra] = rb
+                        vented[rb] |= vented[ra]
+                    elif inside_p:
+                        vented[_root(parent, (ip * ny + jp) * nz + kp)] = True
+                    elif inside_m:
+                        vented[_root(parent, (im * ny + jm) * nz + km)] = True
+    label = np.full(n, -1, dtype=np.int64)
+    number = np.full(n, -1, dtype=np.int64)
+    count = 0
+    for c in range(n):
+        r = _root(parent, c)
+        if vented[r] or solid.flat[c]:
+            continue
+        if number[r] < 0:
+            number[r] = count
+            count += 1
+        label[c] = number[r]
+    return label.reshape(solid.shape), count
+
+
+@njit(cache=True)
+def balance_pockets(rhs, label, count):
+    """rhs -= its mean over each pocket (:func:`pockets`), in place: the pocket's Poisson
+    problem (no pressure fixed on it) is solvable only when its right-hand side sums to 0."""
+    total = np.zeros(count)
+    cells = np.zeros(count)
+    for c in range(rhs.size):
+        k = label.flat[c]
+        if k >= 0:
+            total[k] += rhs.flat[c]
+            cells[k] += 1.0
+    for c in range(rhs.size):
+        k = label.flat[c]
+        if k >= 0:
+            rhs.flat[c] -= total[k] / cells[k]
+
+
+@njit(cache=True)
+def _straddling_cells(x, a, lower, h, shape):
+    """Flat indices of the two cells whose centres straddle point x along axis a (the cells
+    of x on the other axes), -1 for one outside the grid."""
+    cells = np.full(2, -1, dtype=np.int64)
+    index = np.empty(3, dtype=np.int64)
+    for b in range(3):
+        index[b] = int(np.floor((x[b] - lower[b]) / h - (0.5 if b == a else 0.0)))
+    for side in range(2):
+        c, inside = 0, True
+        for b in range(3):
+            i = index[b] + (side if b == a else 0)
+            inside = inside and 0 <= i < shape[b]
+            c = c * shape[b] + i
+        if inside:
+            cells[side] = c
+    return cells
+
+
+@njit(cache=True)
+def triangle_pressure_loads(positions, triangles, psi, solid, lower, h, scale):
+    """Pressure force over rho on each triangle, ``(p_- - p_+) / rho A n``: n its unit
+    normal, A its area, p_-, p_+ the pressures behind and before it, read in the two cells
+    whose centres straddle its centroid along the axis a where |n_a| is largest: the cells
+    either side of the grid face it closes there (:func:`blocked_faces`);
+    p / rho = ``scale`` psi. A side outside the grid or in a solid cell counts as the
+    other side (no jump)."""
+    out = np.zeros((triangles.shape[0], 3))
+    shape = psi.shape
+    flat = psi.reshape(-1)
+    body = solid.reshape(-1)
+    for t in range(triangles.shape[0]):
+        a = positions[triangles[t, 0]]
+        b = positions[triangles[t, 1]]
+        c = positions[triangles[t, 2]]
+        n = np.cross(b - a, c - a)  # |n| = 2 A
+        if (n * n).sum() == 0.0:
+            continue
+        axis = int(np.argmax(np.abs(n)))
+        low, high = _straddling_cells((a + b + c) / 3.0, axis, lower, h, shape)
+        behind, before = (low, high) if n[axis] > 0.0 else (high, low)
+        if behind < 0 or body[behind]:
+            behind = before
+        if before < 0 or body[before]:
+            before = behind
+        if behind < 0 or before < 0:
+            continue
+        jump = 0.5 * scale * (flat[behind] - flat[before])  # n has length 2 A
+        for k in range(3):
+            out[t, k] = jump * n[k]
+    return out
+
+
+@njit(cache=True)
+def membrane_weights(rows, weight, wx, wy, wz):
+    """Install the blocked faces' Poisson weights in the (unpadded) face weights, in place."""
+    for r in range(rows.shape[0]):
+        a, i, j, k = rows[r, 0], rows[r, 1] - 1, rows[r, 2] - 1, rows[r, 3] - 1
+        if a == 0:
+            wx[i, j, k] = weight[r]
+        elif a == 1:
+            wy[i, j, k] = weight[r]
+        else:
+            wz[i, j, k] = weight[r]
+
+
+@njit(cache=True)
+def move_membranes(rows, weight, psi, periodic, u, v, w):
+    """q_f -= weight_f (psi_+ - psi_-) on the blocked faces: the cloth over a face yields to
+    the pressure jump as its own mass lets it.
+
+    A fluid face moves by dt/rho grad p = psi_+ - psi_- (psi = dt p / (rho h)); the cloth
+    of mass mu per area over it by dt (p_- - p_+) / mu, i.e. by rho h / mu times that: a
+    face of weight h x mobility in the Poisson problem. The solve then holds the air's
+    reaction to the cloth's acceleration (its added mass) within the step, which an
+    explicit exchange of force and velocity cannot for a cloth lighter than its air;
+    pinned or static cloth (mobility 0) is a wall."""
+    for r in range(rows.shape[0]):
+        if weight[r] == 0.0:
+            continue
+        a, I, J, K = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
+        d = weight[r] * psi_difference(psi, a, I, J, K, periodic)
+        if a == 0:
+            u[I, J, K] -= d
+        elif a == 1:
+            v[I, J, K] -= d
+        else:
+            w[I, J, K] -= d
+
+
+@njit(cache=True)
+def open_membranes(rows, weight, fu, fv, fw):
+    """Mark the blocked faces with a weight as free (1), in place: the air beside a cloth
+    that moves is no pocket (:func:`pockets`)."""
+    for r in range(rows.shape[0]):
+        if weight[r] > 0.0:
+            a, I, J, K = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
+            if a == 0:
+                fu[I, J, K] = 1
+            elif a == 1:
+                fv[I, J, K] = 1
+            else:
+                fw[I, J, K] = 1

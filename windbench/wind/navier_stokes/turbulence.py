@@ -41,20 +41,6 @@ def _centre(q, a, i, j, k):
 SUBSTEP_LIMIT = 0.9
 
 
-def blackadar_length(z, limit: float) -> np.ndarray:
-    """l = 1 / (1 / (kappa z) + 1 / lambda) (m) at heights ``z`` above the ground."""
-    z = np.asarray(z, dtype=float)
-    return 1.0 / (1.0 / (KARMAN * z) + 1.0 / limit)
-
-
-def surface_layer_viscosity(z, shear, limit: float) -> np.ndarray:
-    """K(z) = l(z)^2 |dU/dz| (m^2/s) from the undisturbed wind's shear (1/s) at ``z``."""
-    return blackadar_length(z, limit) ** 2 * np.abs(shear)
-
-
-KARMAN = 0.41  # von Karman's constant
-
-
 @njit(cache=True, parallel=True)
 def eddy_viscosity(u, v, w, solid, axes, h, length2, out):
     """out = l^2 |S| per cell (m^2/s), l^2 = ``length2[k]`` of the cell's layer (the
@@ -92,6 +78,7 @@ def _strain_plane(u, v, w, solid, axes, h, length2, out, i):
 
 @njit(cache=True, inline="always")
 def _clamp(i, n):
+    """Index i held inside 0..n-1 (a one-sided difference at the grid's edge)."""
     return min(max(i, 0), n - 1)
 
 

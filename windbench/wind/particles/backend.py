@@ -24,6 +24,8 @@ walls and lets a cloth feel the wind that arrives at it; ``all`` applies it at e
 object, ``none`` nowhere); a head-on hit (no tangential part left) ends the particle;
 particles leave through every domain face (boundary kinds do not steer them); cloth
 triangles are obstacles at their current positions (the paper's static collision test).
+That is ``wind.lee_model=paper``, the default; ``mixing`` (:mod:`.mixing`) replaces steps
+2-4 by gusts that mix, keep their flux at bodies and fill the shadow back in.
 
 :class:`ParticleWind` keeps the model (:class:`~.tracing.GustModel` tables, emitters,
 fixed at construction) apart from the :class:`ParticleState` that :func:`advance` takes
@@ -41,10 +43,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from windbench.errors import ConfigError
+from windbench.config import check_settings, setting
 from windbench.geometry.bodies import body_table
 from windbench.geometry.raster import triangle_cell_pairs
 from windbench.wind.base import Obstacles, WindField
+from windbench.wind.particles import mixing
 from windbench.wind.particles.emission import Emitter, emission_specs, emitters_from_scene
 from windbench.wind.particles.tracing import (
     BODIES,
@@ -70,6 +73,7 @@ from windbench.wind.particles.tracing import (
 )
 from windbench.wind.primitives import parameter_table
 from windbench.wind.registry import WindConfig, register_backend
+from windbench.wind.surface_layer import MIXING_LENGTH_LIMIT
 
 CONTACT_OFFSET = 1e-6  # particles rest this many cell widths outside a surface they hit
 SORT_EVERY = 8  # steps between reorderings of the particles by cell (memory locality)
@@ -81,39 +85,63 @@ PREFETCH_DENSITY = 0.5  # particles per cell
 # copies) and a candidate of one step's emission (position, source, instant, duration)
 BYTES_PER_PARTICLE = 128
 BYTES_PER_CANDIDATE = 128
+LEE_MODELS = ("paper", "mixing")
+PAPER_MAX_AGE = 10.0  # s: the paper lee's particles die this old unless wind.max_age says
 
 
 @dataclass
 class ParticleConfig(WindConfig):
-    """``wind.*`` keys of the particle-tracing backend (paper §4.2.2)."""
+    """``wind.*`` keys of the particle-tracing backend (paper §4.2.2; :mod:`.mixing`)."""
 
     name: str = "particles"
-    particles_per_second: float | None = None  # per source; null: particles_per_cell rule
-    particles_per_cell: float = 2.0  # automatic rate: new particles per emitter cell per memory
-    max_particles: int = 1_000_000  # cap on live particles (all sources)
-    max_age: float = 10.0  # s; older particles die
-    memory: float = 0.1  # s; a cell keeps a source's wind this long after its last particle
-    max_hits: int = 8  # collisions per particle per step before it waits for the next step
-    deflected_cells: str = "bodies"  # which hits make later marks w - (n.w) n: all|bodies|none
-    seed: int = 0  # conf/wind/particles.yaml sets ${seed}
+    particles_per_second: float | None = setting(
+        None, "s-1", "emission rate per source; null: the particles_per_cell rule", ge=0
+    )
+    particles_per_cell: float = setting(
+        2.0, "1", "automatic rate: new particles per emitter cell per memory window", gt=0
+    )
+    max_particles: int = setting(1_000_000, "1", "cap on live particles (all sources)", ge=1)
+    max_age: float | None = setting(
+        None, "s", "older particles die; null: 10 s (paper lee), no limit (mixing lee)", gt=0
+    )
+    memory: float = setting(
+        0.1, "s", "a cell counts as reached this long after its last particle", gt=0
+    )
+    max_hits: int = setting(
+        8, "1", "collisions per particle per step before it waits for the next step", ge=1
+    )
+    deflected_cells: str = setting(
+        "bodies",
+        "",
+        "paper lee: which hits make a particle's later marks carry w - (n.w) n",
+        choices=tuple(MARK_MODES),
+    )
+    lee_model: str = setting(
+        "paper",
+        "",
+        "paper: reached cells carry w_i, the rest 0; mixing: gusts that mix and keep their flux",
+        choices=LEE_MODELS,
+    )
+    averaging_time: float = setting(
+        1.0, "s", "mixing lee: time constant of each cell's running mean of its wind", gt=0
+    )
+    mixing_length_limit: float = setting(
+        MIXING_LENGTH_LIMIT, "m", "mixing lee: Blackadar's lambda of the eddy diffusivity", gt=0
+    )
+    seed: int = setting(0, "1", "random seed (conf/wind/particles.yaml sets ${seed})", ge=0)
+
+
+def max_age(params) -> float:
+    """``wind.max_age`` (s), or without one PAPER_MAX_AGE for the paper lee and no limit for
+    the mixing lee, whose particles carry the flux they stand for until they leave."""
+    if params.max_age is not None:
+        return float(params.max_age)
+    return PAPER_MAX_AGE if params.lee_model == "paper" else np.inf
 
 
 def _check(params) -> None:
     """One ConfigError naming the first bad ``wind.*`` value."""
-    auto = params.particles_per_second is None
-    checks = [
-        ("max_particles", params.max_particles >= 1, ">= 1"),
-        ("max_age", params.max_age > 0, "> 0 seconds"),
-        ("memory", params.memory > 0, "> 0 seconds"),
-        ("max_hits", params.max_hits >= 1, ">= 1"),
-        ("particles_per_cell", params.particles_per_cell > 0, "> 0"),
-        ("particles_per_second", auto or params.particles_per_second >= 0, ">= 0 or null"),
-        ("deflected_cells", params.deflected_cells in MARK_MODES, f"one of {sorted(MARK_MODES)}"),
-        ("seed", params.seed >= 0, ">= 0"),
-    ]
-    for key, ok, allowed in checks:
-        if not ok:
-            raise ConfigError(f"wind.{key}", f"must be {allowed}, got {getattr(params, key)}")
+    check_settings(params, ParticleConfig, "wind.")
 
 
 @dataclass(frozen=True)
@@ -125,6 +153,7 @@ class ParticleModel:
     capacity: int  # live particles at most
     n_cells: int
     big_grid: bool  # prefetch the cells ahead while particles are sparse
+    mixing: mixing.MixingLee | None = None  # wind.lee_model=mixing (None: the paper's lee)
 
 
 def particle_model(scene, grid, params) -> ParticleModel:
@@ -140,19 +169,22 @@ def particle_model(scene, grid, params) -> ParticleModel:
     )
     start, items = register_bodies(bodies, cells)
     rules = TraceRules(
-        max_age=float(params.max_age),
+        max_age=max_age(params),
         memory=float(params.memory),
         delta=CONTACT_OFFSET * float(grid.h),
         max_hits=int(params.max_hits),
         mark_mode=MARK_MODES[params.deflected_cells],
     )
     tables = GustModel(cells, source_kinds, source_params, BodyCells(bodies, start, items), rules)
+    emitters = emitters_from_scene(scene, grid, params, int(params.seed))
+    lee = mixing.mixing_lee(scene, grid, params, emitters) if params.lee_model == "mixing" else None
     return ParticleModel(
         tables=tables,
-        emitters=emitters_from_scene(scene, grid, params, int(params.seed)),
+        emitters=emitters,
         capacity=int(params.max_particles),
         n_cells=grid.n_cells,
         big_grid=grid.n_cells >= PREFETCH_CELLS,
+        mixing=lee,
     )
 
 
@@ -173,6 +205,7 @@ class ParticleState:
     carry: np.ndarray  # (n_sources,) fraction of a particle carried to the next step
     counter: np.ndarray  # (n_sources,) particles emitted so far
     history: tuple[tuple[float, np.ndarray], ...]
+    deposits: np.ndarray  # mixing lee: (n_cells, n_sources, 3) dwell time x wind of the step
 
 
 def initial_state(model: ParticleModel, solid: np.ndarray) -> ParticleState:
@@ -196,6 +229,7 @@ def initial_state(model: ParticleModel, solid: np.ndarray) -> ParticleState:
         carry=np.zeros(n_sources),
         counter=np.zeros(n_sources, dtype=np.int64),
         history=(),
+        deposits=np.zeros((model.n_cells if model.mixing else 0, max(n_sources, 1), 3)),
     )
 
 
@@ -247,9 +281,13 @@ def emit(model: ParticleModel, state: ParticleState, work: Workspace, t1: float)
     pos, src, dur = [], [], []
     for e in model.emitters:
         block = work.blocks.setdefault(e.source, {})
+        first = int(state.counter[e.source])
         p, instants, state.carry[e.source], state.counter[e.source] = e.emit(
-            t0, t1, state.carry[e.source], int(state.counter[e.source]), block
+            t0, t1, state.carry[e.source], first, block
         )
+        keep = model.mixing.kept(e.source, p, first) if model.mixing else None
+        if keep is not None:  # the mixing lee's flux weighting of a profile
+            p, instants = p[keep], instants[keep]
         pos.append(p)
         src.append(np.full(len(p), e.source, dtype=np.int64))
         dur.append(t1 - instants)
@@ -299,6 +337,44 @@ def expire(model: ParticleModel, state: ParticleState, touched: np.ndarray) -> P
     return replace(state, history=history)
 
 
+def trace_paper(model, state, work, cloth, step: TraceStep) -> tuple[int, int, int]:
+    """Steps 2-3 of the paper's lee: (survivors, cell crossings, cells marked)."""
+    trace_work = work.velocities(state.n)
+    euler_velocities(model.tables, state.particles, state.n, trace_work.velocities)
+    work.touched, n_touched, crossings, n_alive = trace_gusts(
+        model.tables, cloth, state.cells, state.particles, step, trace_work, work.touched
+    )
+    return n_alive, crossings, n_touched
+
+
+def trace_mixed(model, state, work, cloth, step: TraceStep) -> tuple[int, int, int]:
+    """The mixing lee's walk (:func:`.mixing.trace_mixing`): (survivors, crossings, 0)."""
+    walk = mixing.MixStep(step.dt, step.t_now, step.n, step.n_old, step.new_durations, state.steps)
+    n_alive, crossings = mixing.trace_mixing(
+        model.tables,
+        model.mixing.tables,
+        cloth,
+        state.cells,
+        state.deposits,
+        state.particles,
+        walk,
+        work.trace,
+    )
+    return n_alive, crossings, 0
+
+
+def settle(model, state, work, n_touched: int, dt: float) -> ParticleState:
+    """Step 4: the paper's marks lapse (:func:`expire`), or the mixing lee's cells take the
+    step's deposits into their running mean (:func:`.mixing.blend_cells`)."""
+    if model.mixing is None:
+        return expire(model, state, work.touched[:n_touched].copy())
+    lee = model.mixing
+    scale = lee.inverse_density / (model.tables.grid.h**3 * dt)
+    factor = -np.expm1(-dt / lee.averaging_time)
+    mixing.blend_cells(state.deposits, scale, factor, state.cells.flags, state.cells.u)
+    return state
+
+
 def advance(model, state, work, dt: float, obstacles: Obstacles):
     """One step of length dt (module docstring, steps 1-4): (next state, figures)."""
     t0 = time.perf_counter()
@@ -308,16 +384,13 @@ def advance(model, state, work, dt: float, obstacles: Obstacles):
     state, cloth = register_cloth_cells(model, state, work, obstacles)
     sparse = model.big_grid and state.n < PREFETCH_DENSITY * model.n_cells
     step = TraceStep(dt, t_end, state.n, n_old, new_durations, sparse)
-    trace_work = work.velocities(state.n)
-    euler_velocities(model.tables, state.particles, state.n, trace_work.velocities)
-    work.touched, n_touched, crossings, n_alive = trace_gusts(
-        model.tables, cloth, state.cells, state.particles, step, trace_work, work.touched
-    )
+    trace = trace_paper if model.mixing is None else trace_mixed
+    n_alive, crossings, n_touched = trace(model, state, work, cloth, step)
     t2 = time.perf_counter()
     state = replace(state, n=n_alive, steps=state.steps + 1, time=t_end)
     if state.steps % SORT_EVERY == 0:
         sort_by_cell(model.tables.grid, state.n, state.particles)
-    state = expire(model, state, work.touched[:n_touched].copy())
+    state = settle(model, state, work, n_touched, dt)
     t3 = time.perf_counter()
     figures = {
         "dropped_particles": float(dropped),
@@ -348,14 +421,16 @@ class ParticleWind(WindField):
     def check(cls, scene, grid, params) -> None:
         """Raise ConfigError for bad ``wind.*`` values or source ``emit``/``gusts`` keys."""
         _check(params)
-        emission_specs(scene)
+        specs = emission_specs(scene)
+        if params.lee_model == "mixing":
+            mixing.check_sources(scene, specs)
 
     @classmethod
     def memory(cls, scene, grid, params, dt) -> dict[str, tuple[float, str]]:
         """Live particles (at most ``max_particles``, at most rate x ``max_age``), one step's
         emission candidates, and the per-source cell marks of a multi-source scene."""
         rate = sum(e.rate for e in emitters_from_scene(scene, grid, params, int(params.seed)))
-        live = min(float(params.max_particles), rate * float(params.max_age))
+        live = min(float(params.max_particles), rate * max_age(params))
         n_src = len(scene.sources)
         rate_key = (
             "particles_per_cell" if params.particles_per_second is None else "particles_per_second"

@@ -515,17 +515,62 @@ def euler_velocities(model, particles, n, out):
         )
 
 
+@njit(cache=True, inline="always")
+def _piece_hit(bodies, cloth, flags, cell, p, e, span, work):
+    """Earliest hit along the piece p + [t, t_exit] e (``span``) on the bodies and cloth
+    triangles ``cell`` registers (its ``flags``): (fraction of the piece or 2.0, whether a
+    body was hit); the normal at the hit goes to ``work`` 's hit normal."""
+    b_table, b_start, b_items = bodies
+    hit_n, tmp_n, scratch, ab = work[2], work[3], work[4], work[5]
+    a, b = ab[0], ab[1]
+    t, t_exit = span
+    best = 2.0
+    body_hit = False
+    obstacles = flags & (BODIES | TRIANGLES)
+    if obstacles:  # the piece a -> b lies in this cell: test what it registers
+        a[0], a[1], a[2] = p[0] + t * e[0], p[1] + t * e[1], p[2] + t * e[2]
+        b[0], b[1], b[2] = p[0] + t_exit * e[0], p[1] + t_exit * e[1], p[2] + t_exit * e[2]
+    if obstacles & BODIES:
+        for m in range(b_start[cell], b_start[cell + 1]):
+            e_ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+            sh = first_body_hit(b_table, b_items[m], (a[0], a[1], a[2]), e_ab, scratch, tmp_n)
+            if 0.0 <= sh < best:
+                best = sh
+                body_hit = True
+                hit_n[:] = tmp_n
+    if obstacles & TRIANGLES:
+        best, body_hit = first_triangle_hit(cloth, cell, a, b, e, best, body_hit, hit_n)
+    return best, body_hit
+
+
+@njit(cache=True, inline="always")
+def _mark_cell(model, cells, t_now, ijk, s, marks, wc):
+    """Mark cell ``ijk`` for source s at t_now with w_s(centre), less the normals of the
+    marking hits (``marks`` = (normals, count)), and assemble its wind (§4.2.2); a solid
+    cell keeps u = 0."""
+    flags, marked, values, u = cells
+    g = model.grid
+    cell = (ijk[0] * g.shape[1] + ijk[1]) * g.shape[2] + ijk[2]
+    cx, cy, cz = _centre(ijk, g)
+    primitive_velocity(model.source_kinds[s], model.source_params[s], cx, cy, cz, wc)
+    if marks[1]:
+        _remove_normals(wc, marks[0], marks[1])
+    marked[cell, s] = t_now
+    if not flags[cell] & SOLID:
+        values[cell, s, 0], values[cell, s, 1], values[cell, s, 2] = wc
+        _assemble_cell(cell, marked, values, t_now, model.rules.memory, u)
+
+
 @njit(cache=True)
 def trace_gusts(model, cloth, cells, particles, step, work, touched):
     """Move particles 0..n-1 by the Euler step p += w_i(p) tau (§4.2.2, ``work.velocities``),
     mark the cells their paths cross, slide them along what they hit, compact the survivors.
     Returns (touched, n_touched, crossings, n_alive) (module docstring)."""
-    kinds, prims, rules, g = model.source_kinds, model.source_params, model.rules, model.grid
-    b_table, b_start, b_items = model.bodies
-    flags, marked, values, u = cells
+    rules, g = model.rules, model.grid
+    flags, marked, u = cells[0], cells[1], cells[3]
     positions, sources, ages = particles
-    velocities, wc, hit_n, tmp_n, scratch, ab, normals = work
-    a, b, ny, nz = ab[0], ab[1], g.shape[1], g.shape[2]
+    velocities, wc, hit_n, normals = work[0], work[1], work[2], work[6]
+    ny, nz = g.shape[1], g.shape[2]
     n_touched, crossings, n_alive = 0, 0, 0
     for q in range(step.n):
         qa = q + AHEAD
@@ -552,39 +597,22 @@ def trace_gusts(model, cloth, cells, particles, step, work, touched):
             while True:
                 t_exit = max(t, min(tx, ty, tz, 1.0))
                 cell = (i * ny + j) * nz + k
-                best = 2.0
-                body_hit = False
-                obstacles = flags[cell] & (BODIES | TRIANGLES)
-                if obstacles:  # the piece a -> b lies in this cell: test what it registers
-                    a[0], a[1], a[2] = px + t * ex, py + t * ey, pz + t * ez
-                    b[0], b[1], b[2] = px + t_exit * ex, py + t_exit * ey, pz + t_exit * ez
-                if obstacles & BODIES:
-                    for m in range(b_start[cell], b_start[cell + 1]):
-                        bi = b_items[m]
-                        e_ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-                        sh = first_body_hit(b_table, bi, (a[0], a[1], a[2]), e_ab, scratch, tmp_n)
-                        if 0.0 <= sh < best:
-                            best = sh
-                            body_hit = True
-                            hit_n[:] = tmp_n
-                if obstacles & TRIANGLES:
-                    best, body_hit = first_triangle_hit(
-                        cloth, cell, a, b, (ex, ey, ez), best, body_hit, hit_n
-                    )
+                best, body_hit = _piece_hit(
+                    model.bodies,
+                    cloth,
+                    flags[cell],
+                    cell,
+                    (px, py, pz),
+                    (ex, ey, ez),
+                    (t, t_exit),
+                    work,
+                )
                 if best <= 1.0:
                     n_hits += 1
                     n_marks = _record_hit(rules.mark_mode, body_hit, hit_n, normals, n_marks)
                 if marked[cell, s] != step.t_now or n_marks > 0:  # a free repeat changes nothing
                     first = marked[cell, s] != step.t_now
-                    cx, cy, cz = _centre((i, j, k), g)
-                    # w_i(centre), less the normals of the marking hits (if any)
-                    primitive_velocity(kinds[s], prims[s], cx, cy, cz, wc)
-                    if n_marks:
-                        _remove_normals(wc, normals, n_marks)
-                    marked[cell, s] = step.t_now
-                    if not flags[cell] & SOLID:  # a solid cell keeps u = 0
-                        values[cell, s, 0], values[cell, s, 1], values[cell, s, 2] = wc
-                        _assemble_cell(cell, marked, values, step.t_now, rules.memory, u)
+                    _mark_cell(model, cells, step.t_now, (i, j, k), s, (normals, n_marks), wc)
                     if first:  # its marks lapse memory later: on the touched list
                         touched = _push(touched, n_touched, cell)
                         n_touched += 1
