@@ -89,41 +89,33 @@ def _neighbour_sum(xm, xp, ym, yp, qc, K, axes, all_axes):
     return nb
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FAST_MATH)
 def jacobi_first_sweep(q0, out, alpha, axes, free, changes, peaks):
     """The first sweep from the guess q0 (the right-hand side itself), out of place:
     out = (q0 + alpha sum_nb q0) / (1 + 2 alpha d) on the free faces, out = q0 on every
     other element (prescribed faces, ghosts: refill them from out afterwards).
     ``changes[I]``: the largest update in padded plane I; ``peaks[I]``: the largest |q0|
     there (the field's scale for the stopping test)."""
-    for I in prange(q0.shape[0]):
-        changes[I], peaks[I] = _jacobi_plane(q0, out, alpha, axes, free, np.int64(I))
-
-
-@njit(cache=True, fastmath=FAST_MATH, error_model="numpy")
-def _jacobi_plane(q0, out, alpha, axes, free, I):
-    """Padded plane I of :func:`jacobi_first_sweep`: (largest update, largest |q0|). The
-    parallel loop's body in a function of its own (numba's parallel passes then analyse a
-    call), with the error model numba gives such a body (the same bits)."""
     P0, P1, P2 = q0.shape
     inv = 1.0 / (1.0 + 2.0 * alpha * (axes[0] + axes[1] + axes[2]))
     all_axes = axes[0] != 0 and axes[1] != 0 and axes[2] != 0
-    change, peak = 0.0, 0.0
-    for J in range(P1):
-        qc, oc, fc = q0[I, J], out[I, J], free[I, J]
-        if not (0 < I < P0 - 1 and 0 < J < P1 - 1):  # a ghost row: copied
-            for K in range(P2):
+    for I in prange(P0):
+        change, peak = 0.0, 0.0
+        for J in range(P1):
+            qc, oc, fc = q0[I, J], out[I, J], free[I, J]
+            if not (0 < I < P0 - 1 and 0 < J < P1 - 1):  # a ghost row: copied
+                for K in range(P2):
+                    oc[K] = qc[K]
+                    peak = max(peak, abs(qc[K]))
+                continue
+            xm, xp, ym, yp = q0[I - 1, J], q0[I + 1, J], q0[I, J - 1], q0[I, J + 1]
+            for K in (0, P2 - 1):
                 oc[K] = qc[K]
                 peak = max(peak, abs(qc[K]))
-            continue
-        xm, xp, ym, yp = q0[I - 1, J], q0[I + 1, J], q0[I, J - 1], q0[I, J + 1]
-        for K in (0, P2 - 1):
-            oc[K] = qc[K]
-            peak = max(peak, abs(qc[K]))
-        for K in range(1, P2 - 1):
-            nb = _neighbour_sum(xm, xp, ym, yp, qc, K, axes, all_axes)
-            new = (qc[K] + alpha * nb) * inv if fc[K] else qc[K]
-            oc[K] = new
-            change = max(change, abs(new - qc[K]))
-            peak = max(peak, abs(qc[K]))
-    return change, peak
+            for K in range(1, P2 - 1):
+                nb = _neighbour_sum(xm, xp, ym, yp, qc, K, axes, all_axes)
+                new = (qc[K] + alpha * nb) * inv if fc[K] else qc[K]
+                oc[K] = new
+                change = max(change, abs(new - qc[K]))
+                peak = max(peak, abs(qc[K]))
+        changes[I], peaks[I] = change, peak
