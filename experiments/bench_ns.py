@@ -1,32 +1,56 @@
 """Benchmark of the navier_stokes backend on scene=fence in the cubic domain of
 ``experiment=scaling``: seconds per step (advect, diffuse, project), pressure iterations
-and memory per cell, for 16^3 .. 128^3 cells.
+and memory per cell, in both precisions (``wind.precision``), beside the plain numba MGPCG
+step of ``../shared/baselines/nb_fluid.py`` (``--solver mgpcg --pdtype f64``) measured in
+the same run.
 
-    PYTHONPATH=. python experiments/bench_ns.py [--resolutions 16 32 64 128] [--steps 10]
+    PYTHONPATH=. python experiments/bench_ns.py [--resolutions 64 128] [--steps 10]
+        [--precisions float64 float32] [--advection semi_lagrangian second_order]
+        [--no-baseline]
+    PYTHONPATH=. python experiments/bench_ns.py --validation
 
-Writes experiments/results/bench_ns.csv (one row per resolution: medians over the timed
-steps after two warm-up steps) and prints the machine load (``uptime``) beside it, since the
-machine's 2 cores are shared. ``setup_seconds`` (backend construction, incl. loading or
-compiling the numba kernels) and ``first_step_seconds`` are reported separately; run the
-script twice to see cached-compile figures (numba cache=True).
+
+Writes experiments/results/bench_ns.csv: one row per resolution, precision and advection
+scheme (medians over the timed steps after two warm-up steps) with ``baseline_seconds`` and
+``ratio_to_baseline``. The variants of one resolution are stepped in turn (A, B, A, B,
+...), so that a change in the machine's load hits them alike; the load average (``uptime``)
+is printed and recorded, since the machine's 2 cores are shared. ``setup_seconds``
+(backend construction, incl. loading or compiling the numba kernels) and
+``first_step_seconds`` are reported separately; run the script twice to see cached-compile
+figures (numba cache=True).
+
+``--validation`` runs the validation problems (experiments/validation_ns/problems.py) at
+64 cells in both precisions instead: Taylor-Green at CFL 0.5 for every scheme and
+Poiseuille, their errors and the relative change float32 makes to each, written to
+experiments/results/bench_ns_precision.csv.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
+import sys
 import time
+from itertools import product
 from pathlib import Path
 
+import numba
 import numpy as np
 import pandas as pd
 
+from experiments.validation_ns.problems import poiseuille, taylor_green
 from windbench.cli import compose_config
 from windbench.simulate import prepare
 from windbench.wind import make_wind
 from windbench.wind.base import Obstacles
 
-OUT = Path(__file__).resolve().parent / "results" / "bench_ns.csv"
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "experiments" / "results" / "bench_ns.csv"
+BASELINES = ROOT.parent / "shared" / "baselines"
+VALIDATION_OUT = ROOT / "experiments" / "results" / "bench_ns_precision.csv"
+VALIDATION_CELLS = 64
 
 
 def array_bytes(obj) -> int:
@@ -51,78 +75,152 @@ def array_bytes(obj) -> int:
     return total
 
 
-def bench(resolution: int, steps: int, advection: str, turbulence: str | None) -> dict:
-    cfg = compose_config(
-        [
-            "experiment=scaling",  # scene=fence in a cube: resolution r gives r^3 cells
-            "wind=navier_stokes",
-            f"grid.resolution={resolution}",
-            f"wind.advection={advection}",
-            *([f"wind.turbulence={turbulence}"] if turbulence else []),
-        ]
-    )
-    setup = prepare(cfg)
-    t0 = time.perf_counter()
-    wind = make_wind(cfg.wind, setup.scene, setup.grid)
-    t1 = time.perf_counter()
-    obstacles = Obstacles.rigid_only(setup.scene.bodies)
-    wind.step(setup.dt, obstacles)
-    t2 = time.perf_counter()
-    wind.step(setup.dt, obstacles)
-    rows = []
-    for _ in range(steps):
+class Variant:
+    """One backend configuration at one resolution, built and warmed up."""
+
+    def __init__(self, resolution, precision, advection, turbulence):
+        self.key = dict(
+            resolution=resolution, precision=precision, advection=advection, turbulence=turbulence
+        )
+        cfg = compose_config(
+            [
+                "experiment=scaling",  # scene=fence in a cube: resolution r gives r^3 cells
+                "wind=navier_stokes",
+                f"grid.resolution={resolution}",
+                f"wind.precision={precision}",
+                f"wind.advection={advection}",
+                *([f"wind.turbulence={turbulence}"] if turbulence else []),
+            ]
+        )
+        self.cfg, self.setup = cfg, prepare(cfg)
+        t0 = time.perf_counter()
+        self.wind = make_wind(cfg.wind, self.setup.scene, self.setup.grid)
+        t1 = time.perf_counter()
+        self.obstacles = Obstacles.rigid_only(self.setup.scene.bodies)
+        self.wind.step(self.setup.dt, self.obstacles)
+        t2 = time.perf_counter()
+        self.wind.step(self.setup.dt, self.obstacles)
+        self.setup_seconds, self.first_step_seconds = t1 - t0, t2 - t1
+        self.rows = []
+
+    def step(self):
         s = time.perf_counter()
-        wind.step(setup.dt, obstacles)
-        e = time.perf_counter()
-        rows.append({"step": e - s, **wind.stats()})
-    df = pd.DataFrame(rows)
-    cells = setup.grid.n_cells
-    # a cold solve (zero initial pressure) of the uniform inflow against the fence
-    for a in range(3):
-        wind.q[a][...] = setup.scene.sources[0].velocity[a]
-    wind._apply_boundaries(set_normal=True)
-    wind.psi[...] = 0.0
-    cold_iterations = wind._project()[0]
-    return {
-        "resolution": resolution,
-        "shape": "x".join(map(str, setup.grid.shape)),
-        "cells": cells,
-        "advection": advection,
-        "turbulence": str(cfg.wind.turbulence),
-        "step_seconds": df.step.median(),
-        "advect_seconds": df.advect_seconds.median(),
-        "diffuse_seconds": df.diffuse_seconds.median(),
-        "eddy_seconds": df.eddy_seconds.median(),
-        "project_seconds": df.project_seconds.median(),
-        "pressure_iterations": df.pressure_iterations.median(),
-        "pressure_iterations_max": df.pressure_iterations.max(),
-        "pressure_iterations_cold": cold_iterations,
-        "mac_divergence_max": df.mac_divergence_max.max(),
-        "float64_per_cell": array_bytes(wind) / 8 / cells,
-        "setup_seconds": t1 - t0,
-        "first_step_seconds": t2 - t1,
-        "threads": int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)),
-        "load_average_1min": os.getloadavg()[0],
-    }
+        self.wind.step(self.setup.dt, self.obstacles)
+        self.rows.append({"step": time.perf_counter() - s, **self.wind.stats()})
+
+    def row(self) -> dict:
+        df = pd.DataFrame(self.rows)
+        cells = self.setup.grid.n_cells
+        return {
+            **self.key,
+            "shape": "x".join(map(str, self.setup.grid.shape)),
+            "cells": cells,
+            "turbulence": str(self.cfg.wind.turbulence),
+            "step_seconds": df.step.median(),
+            **{f"{p}_seconds": df[f"{p}_seconds"].median() for p in PHASES},
+            "pressure_iterations": df.pressure_iterations.median(),
+            "pressure_iterations_max": df.pressure_iterations.max(),
+            "mac_divergence_max": df.mac_divergence_max.max(),
+            "bytes_per_cell": array_bytes(self.wind) / cells,
+            "setup_seconds": self.setup_seconds,
+            "first_step_seconds": self.first_step_seconds,
+            "threads": numba.get_num_threads(),
+        }
+
+
+PHASES = ("advect", "diffuse", "eddy", "project")
+
+
+def baseline(resolution: int, folder: Path) -> float:
+    """Median step (s) of the plain numba MGPCG baseline (float64 pressure) at N^3 cells."""
+    proc = subprocess.run(
+        [sys.executable, "nb_fluid.py", "--N", str(resolution), "--solver", "mgpcg",
+         "--pdtype", "f64"],
+        cwd=folder, capture_output=True, text=True, check=True,
+        env={k: v for k, v in os.environ.items() if k != "PEERS_RESULTS"},
+    )  # fmt: skip
+    line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT "))
+    return float(json.loads(line.removeprefix("RESULT "))["median_s"])
+
+
+def bench(resolution: int, args) -> list[dict]:
+    variants = [
+        Variant(resolution, p, a, args.turbulence)
+        for p, a in product(args.precisions, args.advection)
+    ]
+    for _ in range(args.steps):  # in turn: the load hits every variant alike
+        for v in variants:
+            v.step()
+    load = os.getloadavg()[0]
+    rows = [{**v.row(), "load_average_1min": load} for v in variants]
+    del variants
+    base = baseline(resolution, args.baselines) if args.baselines else float("nan")
+    for row in rows:
+        row["baseline_seconds"] = base
+        row["ratio_to_baseline"] = row["step_seconds"] / base
+        row["load_average_after_baseline"] = os.getloadavg()[0]
+    return rows
+
+
+def validation(n: int = VALIDATION_CELLS) -> pd.DataFrame:
+    """The validation errors at n cells in float64 and float32, and float32's relative
+    change of each (|e32 / e64 - 1|)."""
+    rows = []
+    for precision in ("float64", "float32"):
+        for scheme in ("semi_lagrangian", "maccormack", "second_order"):
+            row, _ = taylor_green(n, scheme, dt=0.5 * 2 * np.pi / n, precision=precision)
+            for key in ("rate_rel_error", "linf_rel_error"):
+                rows.append(dict(problem="taylor_green", scheme=scheme, error=key,
+                                 precision=precision, value=row[key]))  # fmt: skip
+        row, _ = poiseuille(n, precision=precision)
+        for key in ("linf_rel_error", "l2_rel_error"):
+            rows.append(dict(problem="poiseuille", scheme="semi_lagrangian", error=key,
+                             precision=precision, value=row[key]))  # fmt: skip
+    df = pd.DataFrame(rows).pivot_table(
+        index=["problem", "scheme", "error"], columns="precision", values="value"
+    )
+    df["relative_change"] = (df.float32 / df.float64 - 1).abs()
+    df["cells"] = n
+    return df.reset_index()
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--resolutions", type=int, nargs="+", default=[16, 32, 64, 128])
     ap.add_argument("--steps", type=int, default=10)
-    ap.add_argument("--advection", default="semi_lagrangian")
+    ap.add_argument("--precisions", nargs="+", default=["float64", "float32"])
+    ap.add_argument("--advection", nargs="+", default=["semi_lagrangian"])
     ap.add_argument("--turbulence", default=None, help="wind.turbulence (default: the config's)")
+    ap.add_argument("--baselines", type=Path, default=BASELINES)
+    ap.add_argument("--no-baseline", dest="baselines", action="store_const", const=None)
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--validation", action="store_true", help="the errors, not the timings")
     args = ap.parse_args()
+    if args.validation:
+        df = validation()
+        print(df.to_string())
+        df.to_csv(VALIDATION_OUT, index=False)
+        print(f"wrote {VALIDATION_OUT}; largest change {df.relative_change.max():.2e}")
+        return
     rows = []
     for res in args.resolutions:
-        row = bench(res, args.steps, args.advection, args.turbulence)
-        print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()}, flush=True)
-        rows.append(row)
+        for row in bench(res, args):
+            shown = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()}
+            print(shown, flush=True)
+            rows.append(row)
     df = pd.DataFrame(rows)
-    if len(df) > 1:
-        slope = np.polyfit(np.log(df.cells), np.log(df.step_seconds), 1)[0]
-        print(f"cost ~ cells^{slope:.2f} over {list(df.resolution)}")
+    for (prec, adv), g in df.groupby(["precision", "advection"]):
+        if len(g) > 1:
+            slope = np.polyfit(np.log(g.cells), np.log(g.step_seconds), 1)[0]
+            print(f"{prec} {adv}: cost ~ cells^{slope:.2f} over {list(g.resolution)}")
+    print(
+        df.pivot_table(
+            index="resolution", columns=["precision", "advection"], values="step_seconds"
+        ).mul(1e3).round(2).to_string()
+        + "\n(ms per step; baseline ms: "
+        + ", ".join(f"{r}: {b * 1e3:.1f}" for r, b in df.groupby("resolution").baseline_seconds.first().items())
+        + ")"
+    )  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)
     df.to_csv(args.out, index=False)
     print(f"wrote {args.out}; uptime: {os.popen('uptime').read().strip()}")

@@ -163,7 +163,7 @@ def test_sigkill_during_a_write_leaves_no_corrupt_dataset(tmp_path, delay):
             ["scene=fence", "scene.bodies.0.min=[50,0,0]", "scene.bodies.0.max=[51,4,2]"],
             r"scene.bodies\[0\]: body lies entirely outside the domain",
         ),
-        (["sim.duration=-1"], "sim.duration: must be > 0 s"),
+        (["sim.duration=-1"], "sim.duration: must be .auto. or a number of seconds > 0"),
     ],
 )
 def test_validation_refuses_before_work(overrides, message):

@@ -40,14 +40,13 @@ def numba_cache_dir(package: Path | None = None) -> Path | None:
 
 def prepare_numba_environment() -> None:
     """Set what numba and its OpenMP runtime read when they load, unless the user has:
-    the passive wait policy (:data:`WAIT_POLICY`) and, for a read-only install, the
-    cache folder (:func:`numba_cache_dir`). Without effect once numba is loaded."""
-    if "numba" in sys.modules:
-        return
+    the passive wait policy (:data:`WAIT_POLICY`, read when the first parallel kernel
+    starts the OpenMP runtime) and, for a read-only install, the cache folder
+    (:func:`numba_cache_dir`, read when numba is imported)."""
     for key, value in WAIT_POLICY.items():
         os.environ.setdefault(key, value)
     cache = numba_cache_dir()
-    if cache is not None and "NUMBA_CACHE_DIR" not in os.environ:
+    if cache is not None and "NUMBA_CACHE_DIR" not in os.environ and "numba" not in sys.modules:
         os.environ["NUMBA_CACHE_DIR"] = str(cache)
 
 

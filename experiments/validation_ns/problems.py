@@ -8,6 +8,8 @@ shared by the tests (``tests/wind/navier_stokes/test_validation.py``, small size
   steady u(y) = f/(2 nu) y (H - y).
 - :func:`free_stream`: a uniform oblique wind through an empty box with inflow/outflow
   faces must stay uniform.
+
+Each takes ``precision`` (``wind.precision``: float64 or float32).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ def backend(spec, resolution, **params) -> NavierStokesWind:
     return NavierStokesWind(scene, grid, OmegaConf.structured(NavierStokesConfig(**params)))
 
 
-def taylor_green(n, scheme, dt, duration=1.0, nu=0.05):
+def taylor_green(n, scheme, dt, duration=1.0, nu=0.05, precision="float64"):
     """Run the Taylor-Green vortex on n x n cells; (figures dict, final (n, n, 2) field)."""
     L = 2 * np.pi
     spec = dict(
@@ -43,7 +45,7 @@ def taylor_green(n, scheme, dt, duration=1.0, nu=0.05):
         boundary={f: "periodic" for f in FACE_NAMES},
         reference_speed=1.0,
     )
-    wind = backend(spec, n, viscosity=nu, advection=scheme, pressure_tol=1e-10)
+    wind = backend(spec, n, viscosity=nu, advection=scheme, pressure_tol=1e-10, precision=precision)
 
     def field(p, t=0.0):
         out = np.zeros_like(p)
@@ -53,12 +55,12 @@ def taylor_green(n, scheme, dt, duration=1.0, nu=0.05):
         return out
 
     wind.set_velocity(field)
-    u0 = wind.faces()[0].copy()
+    u0 = wind.faces()[0].astype(np.float64)  # sums in float64 whatever the precision
     steps = int(round(duration / dt))
     for _ in range(steps):
         wind.step(dt, NONE)
     t = steps * dt
-    u = wind.faces()[0]
+    u = wind.faces()[0].astype(np.float64)
     rate = -np.log((u * u0).sum() / (u0 * u0).sum()) / t
     exact = field(wind.grid.cell_centres().reshape(-1, 3), t).reshape(wind.velocity().shape)
     err = np.abs(wind.velocity() - exact).max()
@@ -75,7 +77,7 @@ def taylor_green(n, scheme, dt, duration=1.0, nu=0.05):
     ), wind.velocity()[:, :, 0, :2].copy()
 
 
-def poiseuille(n, H=1.0, nu=1.0, f=8.0, duration=1.5):
+def poiseuille(n, H=1.0, nu=1.0, f=8.0, duration=1.5, precision="float64"):
     """Run the channel to steady state on n cells across; (figures, (y, u, u_exact))."""
     spec = dict(
         name="poiseuille",
@@ -91,7 +93,9 @@ def poiseuille(n, H=1.0, nu=1.0, f=8.0, duration=1.5):
         reference_speed=1.0,
     )
     dt = 10.0 * (H / n) ** 2 / nu  # alpha = nu dt / h^2 = 10
-    wind = backend(spec, n, viscosity=nu, body_force=[f, 0.0, 0.0], diffusion_tol=1e-11)
+    wind = backend(
+        spec, n, viscosity=nu, body_force=[f, 0.0, 0.0], diffusion_tol=1e-11, precision=precision
+    )
     for _ in range(int(round(duration / dt))):
         wind.step(dt, NONE)
     y = wind.grid.axes()[1]
@@ -106,7 +110,7 @@ def poiseuille(n, H=1.0, nu=1.0, f=8.0, duration=1.5):
     ), (y, got, exact)
 
 
-def free_stream(n, scheme, U=(2.0, 0.5, -0.3), steps=20):
+def free_stream(n, scheme, U=(2.0, 0.5, -0.3), steps=20, precision="float64"):
     """Uniform wind U through an empty 4 x 2 x 2 m box; largest relative deviation."""
     spec = dict(
         name="free_stream",
@@ -121,7 +125,7 @@ def free_stream(n, scheme, U=(2.0, 0.5, -0.3), steps=20):
         ),
         sources=[{"type": "uniform", "velocity": list(U)}],
     )
-    wind = backend(spec, n, advection=scheme)
+    wind = backend(spec, n, advection=scheme, precision=precision)
     for _ in range(steps):
         wind.step(0.05, NONE)
     dev = np.abs(wind.velocity() - np.asarray(U)).max() / np.linalg.norm(U)

@@ -286,7 +286,27 @@ def _carry_plane(q, a, I, lo, hi, cells, periodic, out, qmin, qmax, bounds):
         _carry_row(q, a, I, J, lo, hi, J - e1, cells, periodic, (out, qmin, qmax), bounds)
 
 
-@njit(cache=True, parallel=True, fastmath=FAST_MATH)
+@njit(cache=True, fastmath=FAST_MATH, error_model="numpy")
+def _advect_planes(u, v, w, cells, periodic, dt_h, src, out, qmin, qmax, bounds, span):
+    """One thread's run of :func:`advect`: the u-face planes span[0] .. span[1] - 1 with
+    the v- and w-faces of their cell planes, displacements in a ring of two planes. A
+    function of its own rather than the parallel loop's body, which numba's parallel
+    passes would otherwise analyse with every helper inlined (most of its compile time)."""
+    start, end = span
+    planes = cells[0] + 1
+    ring = np.empty((2, cells[1] + 2, cells[2] + 2, 3))
+    _backtrace_plane(u, v, w, start - 1, cells, periodic, dt_h, ring[(start - 1) % 2])
+    for I in range(start, end):
+        hi = ring[I % 2]
+        lo = ring[(I - 1) % 2]
+        _backtrace_plane(u, v, w, I, cells, periodic, dt_h, hi)
+        _carry_plane(src[0], 0, I, lo, hi, cells, periodic, out[0], qmin[0], qmax[0], bounds)
+        if I < planes:  # the v- and w-faces of cell plane I
+            _carry_plane(src[1], 1, I, hi, hi, cells, periodic, out[1], qmin[1], qmax[1], bounds)
+            _carry_plane(src[2], 2, I, hi, hi, cells, periodic, out[2], qmin[2], qmax[2], bounds)
+
+
+@njit(cache=True, parallel=True)
 def advect(u, v, w, cells, periodic, dt_h, chunks, src, out, qmin, qmax, bounds):
     """out[a] = src[a](x - d) at every interior face of component a = 0, 1, 2 (tuples of
     the three padded arrays), d the RK2 backtrace displacement of the velocity (u, v, w)
@@ -304,19 +324,6 @@ def advect(u, v, w, cells, periodic, dt_h, chunks, src, out, qmin, qmax, bounds)
     planes = cells[0] + 1
     chunks = max(1, min(chunks, planes))
     for c in prange(chunks):
-        start = 1 + (c * planes) // chunks
-        end = 1 + ((c + 1) * planes) // chunks
-        ring = np.empty((2, cells[1] + 2, cells[2] + 2, 3))
-        _backtrace_plane(u, v, w, start - 1, cells, periodic, dt_h, ring[(start - 1) % 2])
-        for I in range(start, end):
-            hi = ring[I % 2]
-            lo = ring[(I - 1) % 2]
-            _backtrace_plane(u, v, w, I, cells, periodic, dt_h, hi)
-            _carry_plane(src[0], 0, I, lo, hi, cells, periodic, out[0], qmin[0], qmax[0], bounds)
-            if I < planes:  # the v- and w-faces of cell plane I
-                _carry_plane(
-                    src[1], 1, I, hi, hi, cells, periodic, out[1], qmin[1], qmax[1], bounds
-                )
-                _carry_plane(
-                    src[2], 2, I, hi, hi, cells, periodic, out[2], qmin[2], qmax[2], bounds
-                )
+        k = np.int64(c)
+        span = (1 + (k * planes) // chunks, 1 + ((k + 1) * planes) // chunks)
+        _advect_planes(u, v, w, cells, periodic, dt_h, src, out, qmin, qmax, bounds, span)

@@ -29,7 +29,10 @@ source only where it blows in, with its inflow ``turbulence`` if it has one and 
 a net volume flux turns its inflow faces into openings (pressure zero). The initial
 field is the superposed sources, zero at bodies, projected. Cells whose centre lies in a
 rigid body are solid: every face touching one has zero velocity (the paper's interior
-check).
+check). ``wind.precision=float32`` stores the velocity, its scratch and the pressure solve's
+vectors in single precision (half the bytes each kernel moves); the pressure, the
+arithmetic, every sum and the viscous solve's iterate stay double, and the pressure
+tolerance is at least TOLERANCE_FLOOR.
 
 Figures per step (``stats()``): pressure iterations, residual and right-hand side, the
 MAC divergence on air cells, diffusion sweeps, CFL, cells marked by cloth, the largest
@@ -81,6 +84,10 @@ from windbench.wind.registry import WindConfig, register_backend
 from windbench.wind.surface_layer import MIXING_LENGTH_LIMIT
 
 ADVECTION = ("semi_lagrangian", "maccormack", "second_order")
+PRECISION = ("float64", "float32")
+# float32 holds about seven digits: a pressure solve asked for less than this relative
+# residual would stop on rounding noise (or never), so its tolerance is at least this
+TOLERANCE_FLOOR = {"float64": 0.0, "float32": 1e-6}
 COUPLING = ("none", "paper", "projection")
 TURBULENCE = ("none", "smagorinsky", "mixing_length")
 DIFFUSION_MAX_SWEEPS = 500
@@ -103,6 +110,9 @@ class NavierStokesConfig(WindConfig):
     smagorinsky_constant: float = 0.17  # C_s of nu_t = (C_s h)^2 |S|
     mixing_length_limit: float = MIXING_LENGTH_LIMIT  # m, Blackadar's lambda
     seed: int = 0  # synthetic inflow turbulence (conf/wind/navier_stokes.yaml sets ${seed})
+    # float64 | float32: storage of the velocity, its scratch and the pressure solve's
+    # vectors (the pressure itself, the arithmetic and every sum stay float64)
+    precision: str = "float64"
 
 
 def _check(params):
@@ -118,6 +128,9 @@ def _check(params):
             "projection works with wind.advection semi_lagrangian or maccormack, not "
             "second_order (its projection carries half the pressure to the next step)",
         )
+    name = str(params.get("precision"))
+    if name not in PRECISION:
+        raise ConfigError("wind.precision", f"must be one of {list(PRECISION)}, got {name!r}")
     name = str(params.get("turbulence"))
     if name not in TURBULENCE:
         raise ConfigError("wind.turbulence", f"must be one of {list(TURBULENCE)}, got {name!r}")
@@ -176,7 +189,8 @@ class NavierStokesWind(WindField):
         self.advection = str(params.advection)
         self.coupling = str(params.coupling)
         self.viscosity = float(params.viscosity)
-        self.tol = float(params.pressure_tol)
+        self.dtype = np.dtype(str(params.precision))
+        self.tol = max(float(params.pressure_tol), TOLERANCE_FLOOR[self.dtype.name])
         self.diffusion_tol = float(params.diffusion_tol)
         self.max_iterations = int(params.pressure_max_iterations)
         self.relaxation = float(params.source_relaxation)
@@ -207,10 +221,12 @@ class NavierStokesWind(WindField):
         self.prim_radii = np.array([max(p.core_radius, self.h) for p in interior])
         self.target = self._mass_sources(interior)
         # state: the three padded face arrays, pressure (warm start) and work arrays
-        self.q = [np.zeros(padded_shape(shape, a)) for a in range(3)]
+        self.q = [np.zeros(padded_shape(shape, a), self.dtype) for a in range(3)]
         self.work = [np.zeros_like(x) for x in self.q]
         limited = self.advection in ("maccormack", "second_order")
         self.work2 = [np.zeros_like(x) for x in self.q] if limited else None
+        single = self.dtype != np.float64  # the viscous solve's iterate: float64 scratch
+        self.diffusion_iterate = [np.zeros(x.shape) for x in self.q] if single else None
         self.qmin = [np.zeros_like(x) for x in self.q] if limited else None
         self.qmax = [np.zeros_like(x) for x in self.q] if limited else None
         second = self.advection == "second_order"
@@ -224,7 +240,9 @@ class NavierStokesWind(WindField):
         self.free = [f.copy() for f in self.free_static]
         self.solid_faces = [self._faces_touching_solid(a) for a in range(3)]
         dirichlet = any(k in (OUTFLOW, OPENING) for k in self.kinds)
-        self.poisson = MultigridPoisson(shape, self.periodic, singular=not dirichlet)
+        self.poisson = MultigridPoisson(
+            shape, self.periodic, singular=not dirichlet, dtype=self.dtype
+        )
         self.weights = [np.zeros(w.shape) for w in self.poisson.fine.w]
         self._set_weights()
         self.psi = np.zeros(shape)
@@ -484,22 +502,28 @@ class NavierStokesWind(WindField):
 
     def _diffuse(self, dt) -> int:
         """Implicit viscous diffusion of the three components (:mod:`.diffusion`): a first
-        Jacobi sweep from the advected field into the work arrays, which then become the
-        state while the advected field stays as the right-hand side, then red-black
-        Gauss-Seidel sweeps until the contraction bound meets ``diffusion_tol``."""
+        Jacobi sweep from the advected field into the iterate, while the advected field
+        stays as the right-hand side, then red-black Gauss-Seidel sweeps until the
+        contraction bound meets ``diffusion_tol``. In float64 the iterate is the work
+        arrays, which then become the state; in float32 it is float64 scratch, copied into
+        the state at the end (a float32 iterate would stall at its rounding, which the
+        solve's condition, up to 1 + 4 alpha d, amplifies)."""
         alpha = self.viscosity * dt / self.h**2
         if alpha == 0.0:
             return 0
         n = max(x.shape[0] for x in self.q)
         changes, peaks = np.zeros(n), np.zeros(n)
         change = peak = 0.0
+        iterate = self.work if self.diffusion_iterate is None else self.diffusion_iterate
         for a in range(3):
             diffusion.jacobi_first_sweep(
-                self.q[a], self.work[a], alpha, self.axes, self.free[a], changes, peaks
+                self.q[a], iterate[a], alpha, self.axes, self.free[a], changes, peaks
             )
-            boundaries.fill_boundary(self.work[a], a, self.kinds, self.planes[a], False)
+            boundaries.fill_boundary(iterate[a], a, self.kinds, self.planes[a], False)
             change, peak = max(change, changes.max()), max(peak, peaks.max())
-        self.q, self.work = self.work, self.q  # work: the right-hand side q0 from here
+        rhs = self.q
+        if iterate is self.work:
+            self.q, self.work = self.work, self.q  # work: the right-hand side q0 from here
         scale = max(peak, self.scene.reference_speed)
         bound = diffusion.error_bound_factor(alpha, int(self.axes.sum()))
         sweeps = 1
@@ -510,10 +534,13 @@ class NavierStokesWind(WindField):
                 for colour in (0, 1):
                     changes[:] = 0.0
                     diffusion.gauss_seidel_half(
-                        self.q[a], self.work[a], colour, alpha, self.axes, self.free[a], changes
+                        iterate[a], rhs[a], colour, alpha, self.axes, self.free[a], changes
                     )
                     change = max(change, changes.max())
-                    boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], False)
+                    boundaries.fill_boundary(iterate[a], a, self.kinds, self.planes[a], False)
+        if iterate is not self.q:
+            for a in range(3):
+                np.copyto(self.q[a], iterate[a], casting="same_kind")
         return sweeps
 
     def _project(self):

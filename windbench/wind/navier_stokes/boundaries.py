@@ -87,6 +87,16 @@ def _axis_first(q, b):
 
 
 @njit(cache=True)
+def _copy_plane(dst, src):
+    """dst[:, :] = src[:, :n1, :n2] for two planes (views): written out, one compiled loop
+    for every copy of :func:`fill_boundary` (an array assignment per statement compiled a
+    broadcasting loop of its own each)."""
+    for c1 in range(dst.shape[0]):
+        for c2 in range(dst.shape[1]):
+            dst[c1, c2] = src[c1, c2]
+
+
+@njit(cache=True)
 def _mirror(qb, ghost, inner, wall):
     """qb[ghost] = 2 wall - qb[inner] (planes of an axis-first view): the wall value
     halfway between the ghost and the inner cell."""
@@ -136,27 +146,27 @@ def fill_boundary(q, a, kinds, planes, set_normal):
         if b == a:  # the normal component: boundary faces 1 and n_b + 1, ghosts beyond
             lo_face, hi_face = 1, n_b + 1
             if lo_kind == PERIODIC:
-                qb[hi_face] = qb[lo_face]
-                qb[0] = qb[hi_face - 1]
-                qb[hi_face + 1] = qb[lo_face + 1]
+                _copy_plane(qb[hi_face], qb[lo_face])
+                _copy_plane(qb[0], qb[hi_face - 1])
+                _copy_plane(qb[hi_face + 1], qb[lo_face + 1])
                 continue
             for side in range(2):
                 kind = lo_kind if side == 0 else hi_kind
                 face = lo_face if side == 0 else hi_face
                 if set_normal and kind != OUTFLOW:
-                    qb[face] = planes[2 * b + side, : qb.shape[1], : qb.shape[2]]
-                qb[0 if side == 0 else hi_face + 1] = qb[face]
+                    _copy_plane(qb[face], planes[2 * b + side])
+                _copy_plane(qb[0 if side == 0 else hi_face + 1], qb[face])
         else:  # a tangential component: ghost cells h/2 beyond the face
             if lo_kind == PERIODIC:
-                qb[0] = qb[n_b]
-                qb[n_b + 1] = qb[1]
+                _copy_plane(qb[0], qb[n_b])
+                _copy_plane(qb[n_b + 1], qb[1])
                 continue
             for side in range(2):
                 kind = lo_kind if side == 0 else hi_kind
                 inner = 1 if side == 0 else n_b
                 ghost = 0 if side == 0 else n_b + 1
                 if kind == SLIP or kind == OUTFLOW:
-                    qb[ghost] = qb[inner]
+                    _copy_plane(qb[ghost], qb[inner])
                 else:  # inflow, opening, no_slip: the wall value at the face
                     _mirror(qb, ghost, inner, planes[2 * b + side])
 

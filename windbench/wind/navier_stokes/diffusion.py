@@ -20,6 +20,7 @@ touching a body, cloth-blocked faces) are not updated. Unconditionally stable: t
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit, prange
 
 from windbench.wind.navier_stokes.flags import FAST_MATH
@@ -69,8 +70,8 @@ def gauss_seidel_half(q, q0, colour, alpha, axes, free, changes):
     ``axes[b] = 0`` drops axis b: a one-cell periodic axis, whose neighbours are the face
     itself (the 2D problems), so its terms cancel exactly.
     """
-    for I in prange(1, q.shape[0] - 1):
-        changes[I] = _plane(q, q0, I, colour, alpha, axes, free)
+    for I in prange(1, q.shape[0] - 1):  # (a signed index: one compiled _plane, see multigrid)
+        changes[I] = _plane(q, q0, np.int64(I), colour, alpha, axes, free)
 
 
 @njit(cache=True, inline="always")

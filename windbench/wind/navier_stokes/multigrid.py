@@ -70,6 +70,13 @@ PRECONDITIONER_DTYPE = np.float32
 NO_DOT = (np.zeros((0, 0, 0)), np.zeros(0))
 
 
+# What :func:`_operator_plane` computes: as run-time booleans (np.bool_), not constants, so
+# that both share one compiled version (a constant True or False is a literal type, which
+# numba compiles a version of the function for). Likewise the parallel loops hand their
+# plane index on as np.int64: prange's own index is unsigned in the parallel version of
+# the loop and signed in its first typing, and each would compile the callee once more.
+RESIDUAL, OPERATOR = np.bool_(True), np.bool_(False)
+
 # Row classes (:func:`classify_rows`): the kernels treat each row (i, j, :) by its class.
 ALL_OPEN = 0  # interior row of an isotropic level, every face of its inner cells open
 ROW_CONSTANT = 1  # each of the inner cells' six face weights the same all along the row
@@ -250,7 +257,7 @@ def residual(x, b, level, out):
     """out = b - A x; returns out . out, summed as :func:`dot` does (in the same pass)."""
     partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        _operator_plane(x, b, level, i, out[i], True)
+        _operator_plane(x, b, level, np.int64(i), out[i], RESIDUAL)
         partial[i] = _plane_dot(out, out, i)
     return ordered_sum(partial)
 
@@ -261,7 +268,7 @@ def apply_operator(x, level, out):
     (plane by plane while the plane is in cache: one pass less per CG iteration)."""
     partial = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        _operator_plane(x, x, level, i, out[i], False)
+        _operator_plane(x, x, level, np.int64(i), out[i], OPERATOR)
         partial[i] = _plane_dot(x, out, i)
     return ordered_sum(partial)
 
@@ -387,7 +394,7 @@ def gauss_seidel(x, b, level, colour, halves, r, partial):
         c = (colour + half) % 2
         final = with_dot and half == halves - 1
         for i in prange(last):
-            _gs_plane(x, b, level, i, c)
+            _gs_plane(x, b, level, np.int64(i), c)
             if final:
                 partial[i] = _plane_dot(r, x, i)
         for i in range(last, nx):
@@ -403,25 +410,33 @@ def residual_restrict(x, b, level, ratio, coarse):
     or 2 per axis). The residual of the fine planes under one coarse plane goes to a
     scratch block and straight into the mean: it is never stored as a whole field (a
     write and a read of a fine field less per cycle)."""
-    n0, n1, n2 = coarse.shape
+    for I in prange(coarse.shape[0]):
+        _restrict_plane(x, b, level, ratio, coarse, np.int64(I))
+
+
+@njit(cache=True, error_model="numpy")
+def _restrict_plane(x, b, level, ratio, coarse, I):
+    """Coarse plane I of :func:`residual_restrict` (the parallel loop's body, in a function
+    of its own: numba's parallel passes then analyse a call, not the inlined stencil; the
+    error model is the one numba gives a parallel loop's body, so the same bits)."""
+    n1, n2 = coarse.shape[1], coarse.shape[2]
     r0, r1, r2 = ratio[0], ratio[1], ratio[2]
     inv = 1.0 / (r0 * r1 * r2)
-    for I in prange(n0):
-        fine = np.empty((r0, x.shape[1], x.shape[2]), x.dtype)
+    fine = np.empty((r0, x.shape[1], x.shape[2]), x.dtype)
+    for a in range(r0):
+        _operator_plane(x, b, level, r0 * I + a, fine[a], RESIDUAL)
+    for J in range(n1):
+        coarse[I, J, :] = 0.0
         for a in range(r0):
-            _operator_plane(x, b, level, r0 * I + a, fine[a], True)
-        for J in range(n1):
-            coarse[I, J, :] = 0.0
-            for a in range(r0):
-                for bb in range(r1):
-                    j = r1 * J + bb
-                    for K in range(n2):
-                        acc = fine[a, j, r2 * K]
-                        if r2 == 2:
-                            acc += fine[a, j, r2 * K + 1]
-                        coarse[I, J, K] += acc
-            for K in range(n2):
-                coarse[I, J, K] *= inv
+            for bb in range(r1):
+                j = r1 * J + bb
+                for K in range(n2):
+                    acc = fine[a, j, r2 * K]
+                    if r2 == 2:
+                        acc += fine[a, j, r2 * K + 1]
+                    coarse[I, J, K] += acc
+        for K in range(n2):
+            coarse[I, J, K] *= inv
 
 
 @njit(cache=True, parallel=True)
@@ -498,7 +513,8 @@ def dot(a, b):
 @njit(cache=True, parallel=True)
 def cg_update(alpha, p, q, x, r, r_low):
     """x += alpha p, r -= alpha q, r_low = r in r_low's precision (the next cycle's
-    right-hand side, in the same pass); return r . r (by planes, thread-count independent)."""
+    right-hand side, in the same pass); return r . r (by planes, thread-count independent).
+    The arithmetic is float64 whatever the precision the vectors are stored in."""
     n0, n1, n2 = x.shape
     partial = np.empty(n0)
     for i in prange(n0):
@@ -524,13 +540,10 @@ def xpby(x, beta, y):
                 y[i, j, k] = x[i, j, k] + beta * y[i, j, k]
 
 
-@njit(cache=True, parallel=True)
 def cast_copy(src, dst):
-    """dst = src converted to dst's dtype (the preconditioner's precision and back)."""
-    for i in prange(src.shape[0]):
-        for j in range(src.shape[1]):
-            for k in range(src.shape[2]):
-                dst[i, j, k] = src[i, j, k]
+    """dst = src converted to dst's dtype (the preconditioner's precision and back; numpy:
+    a copy or two per solve does not pay for compiling a kernel per pair of dtypes)."""
+    np.copyto(dst, src, casting="same_kind")
 
 
 @njit(cache=True)
@@ -614,7 +627,9 @@ class _Level:
 class MultigridPoisson:
     """MGPCG solver of A psi = b on a fixed grid whose face weights may change per step."""
 
-    def __init__(self, shape, periodic, singular: bool, min_coarse: int = 4):
+    def __init__(self, shape, periodic, singular: bool, min_coarse: int = 4, dtype=np.float64):
+        """``dtype``: CG's vectors r, p and A p (the solution x and the reductions stay in
+        float64 whatever it is, see :func:`cg_update`)."""
         self.periodic = np.asarray(periodic, dtype=np.bool_)
         self.singular = singular
         levels = [_Level(shape, np.ones(3), self.periodic, PRECONDITIONER_DTYPE, FINE_OMEGA)]
@@ -641,10 +656,10 @@ class MultigridPoisson:
         )  # fmt: skip
         fine = levels[0]
         self.active = np.zeros(fine.shape, dtype=np.bool_)
-        self.r = np.zeros(fine.shape)
-        self.z = np.zeros(fine.shape) if singular else None  # M r with the constant removed
-        self.p = np.zeros(fine.shape)
-        self.q = np.zeros(fine.shape)
+        self.r = np.zeros(fine.shape, dtype)
+        self.z = np.zeros(fine.shape, dtype) if singular else None  # M r, constant removed
+        self.p = np.zeros(fine.shape, dtype)
+        self.q = np.zeros(fine.shape, dtype)
         self.rhs_norm = 0.0  # ||b||_2 of the last solve
 
     @property

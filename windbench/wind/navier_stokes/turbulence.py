@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit, prange
 
 from windbench.wind.navier_stokes.boundaries import cells_beside
@@ -45,27 +46,34 @@ def eddy_viscosity(u, v, w, solid, axes, h, length2, out):
     """out = l^2 |S| per cell (m^2/s), l^2 = ``length2[k]`` of the cell's layer (the
     Smagorinsky closure: (C_s h)^2), 0 in solids. Derivatives along an inactive axis
     (``axes[b] = 0``) are zero."""
-    nx, ny, nz = solid.shape
-    for i in prange(nx):
-        for j in range(ny):
-            for k in range(nz):
-                if solid[i, j, k]:
-                    out[i, j, k] = 0.0
-                    continue
-                sxx = (u[i + 2, j + 1, k + 1] - u[i + 1, j + 1, k + 1]) * axes[0]
-                syy = (v[i + 1, j + 2, k + 1] - v[i + 1, j + 1, k + 1]) * axes[1]
-                szz = (w[i + 1, j + 1, k + 2] - w[i + 1, j + 1, k + 1]) * axes[2]
-                dudy = 0.5 * (_centre(u, 0, i, j + 1, k) - _centre(u, 0, i, j - 1, k)) * axes[1]
-                dudz = 0.5 * (_centre(u, 0, i, j, k + 1) - _centre(u, 0, i, j, k - 1)) * axes[2]
-                dvdx = 0.5 * (_centre(v, 1, i + 1, j, k) - _centre(v, 1, i - 1, j, k)) * axes[0]
-                dvdz = 0.5 * (_centre(v, 1, i, j, k + 1) - _centre(v, 1, i, j, k - 1)) * axes[2]
-                dwdx = 0.5 * (_centre(w, 2, i + 1, j, k) - _centre(w, 2, i - 1, j, k)) * axes[0]
-                dwdy = 0.5 * (_centre(w, 2, i, j + 1, k) - _centre(w, 2, i, j - 1, k)) * axes[1]
-                sxy = 0.5 * (dudy + dvdx)
-                sxz = 0.5 * (dudz + dwdx)
-                syz = 0.5 * (dvdz + dwdy)
-                ss = sxx * sxx + syy * syy + szz * szz + 2.0 * (sxy * sxy + sxz * sxz + syz * syz)
-                out[i, j, k] = length2[k] * math.sqrt(2.0 * ss) / h  # differences per cell: / h
+    for i in prange(solid.shape[0]):
+        _strain_plane(u, v, w, solid, axes, h, length2, out, np.int64(i))
+
+
+@njit(cache=True, error_model="numpy")
+def _strain_plane(u, v, w, solid, axes, h, length2, out, i):
+    """Cell plane i of :func:`eddy_viscosity` (its parallel loop's body in a function of
+    its own, with the error model numba gives such a body: less to compile, same bits)."""
+    ny, nz = solid.shape[1], solid.shape[2]
+    for j in range(ny):
+        for k in range(nz):
+            if solid[i, j, k]:
+                out[i, j, k] = 0.0
+                continue
+            sxx = (u[i + 2, j + 1, k + 1] - u[i + 1, j + 1, k + 1]) * axes[0]
+            syy = (v[i + 1, j + 2, k + 1] - v[i + 1, j + 1, k + 1]) * axes[1]
+            szz = (w[i + 1, j + 1, k + 2] - w[i + 1, j + 1, k + 1]) * axes[2]
+            dudy = 0.5 * (_centre(u, 0, i, j + 1, k) - _centre(u, 0, i, j - 1, k)) * axes[1]
+            dudz = 0.5 * (_centre(u, 0, i, j, k + 1) - _centre(u, 0, i, j, k - 1)) * axes[2]
+            dvdx = 0.5 * (_centre(v, 1, i + 1, j, k) - _centre(v, 1, i - 1, j, k)) * axes[0]
+            dvdz = 0.5 * (_centre(v, 1, i, j, k + 1) - _centre(v, 1, i, j, k - 1)) * axes[2]
+            dwdx = 0.5 * (_centre(w, 2, i + 1, j, k) - _centre(w, 2, i - 1, j, k)) * axes[0]
+            dwdy = 0.5 * (_centre(w, 2, i, j + 1, k) - _centre(w, 2, i, j - 1, k)) * axes[1]
+            sxy = 0.5 * (dudy + dvdx)
+            sxz = 0.5 * (dudz + dwdx)
+            syz = 0.5 * (dvdz + dwdy)
+            ss = sxx * sxx + syy * syy + szz * szz + 2.0 * (sxy * sxy + sxz * sxz + syz * syz)
+            out[i, j, k] = length2[k] * math.sqrt(2.0 * ss) / h  # differences per cell: / h
 
 
 @njit(cache=True, inline="always")
@@ -95,19 +103,26 @@ def eddy_diffusion(q, a, nu, axes, dt_h2, free, out):
             for K in range(P2):
                 out[I, J, K] = q[I, J, K]
     for I in prange(1, P0 - 1):
-        for J in range(1, P1 - 1):
-            for K in range(1, P2 - 1):
-                if not free[I, J, K]:
+        _eddy_plane(q, a, nu, axes, dt_h2, free, out, np.int64(I))
+
+
+@njit(cache=True, error_model="numpy")
+def _eddy_plane(q, a, nu, axes, dt_h2, free, out, I):
+    """Padded plane I of :func:`eddy_diffusion`'s update (the parallel loop's body in a
+    function of its own, as :func:`_strain_plane`)."""
+    for J in range(1, q.shape[1] - 1):
+        for K in range(1, q.shape[2] - 1):
+            if not free[I, J, K]:
+                continue
+            qc = q[I, J, K]
+            nc = _face_nu(nu, I, J, K, a)
+            flux = 0.0
+            for b in range(3):
+                if axes[b] == 0:
                     continue
-                qc = q[I, J, K]
-                nc = _face_nu(nu, I, J, K, a)
-                flux = 0.0
-                for b in range(3):
-                    if axes[b] == 0:
-                        continue
-                    e0, e1, e2 = int(b == 0), int(b == 1), int(b == 2)
-                    n_plus = 0.5 * (nc + _face_nu(nu, I + e0, J + e1, K + e2, a))
-                    n_minus = 0.5 * (nc + _face_nu(nu, I - e0, J - e1, K - e2, a))
-                    flux += n_plus * (q[I + e0, J + e1, K + e2] - qc)
-                    flux -= n_minus * (qc - q[I - e0, J - e1, K - e2])
-                out[I, J, K] = qc + dt_h2 * flux
+                e0, e1, e2 = int(b == 0), int(b == 1), int(b == 2)
+                n_plus = 0.5 * (nc + _face_nu(nu, I + e0, J + e1, K + e2, a))
+                n_minus = 0.5 * (nc + _face_nu(nu, I - e0, J - e1, K - e2, a))
+                flux += n_plus * (q[I + e0, J + e1, K + e2] - qc)
+                flux -= n_minus * (qc - q[I - e0, J - e1, K - e2])
+            out[I, J, K] = qc + dt_h2 * flux
