@@ -9,13 +9,8 @@ import ast
 import re
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
-MAX_LINES, MAX_PARAMETERS, MAX_DOCSTRING = 100, 12, 40
-# Files exempt while being restructured; a file here that already passes makes the test
-# fail, so the set only shrinks.
-PENDING: set[str] = set()
+MAX_LINES, MAX_PARAMETERS, MAX_DOCSTRING = 80, 12, 40
 HISTORY = re.compile(
     r"\bissues?\s*#?\d+"  # issue 6, issue #3, issues 4
     r"|\b(?:PR|pull request)\s*#?\d+"
@@ -79,11 +74,7 @@ def _relative(path: Path) -> str:
 
 
 def test_functions_and_module_docstrings_are_small():
-    faults = {
-        _relative(p): f
-        for p in _sources()
-        if _relative(p) not in PENDING and (f := _shape_faults(p))
-    }
+    faults = {_relative(p): f for p in _sources() if (f := _shape_faults(p))}
     assert not faults, "\n".join(f"{path}: {'; '.join(f)}" for path, f in faults.items())
 
 
@@ -91,19 +82,6 @@ def test_no_development_history_in_the_tree():
     faults = {
         _relative(p): f
         for p in _tree_files()
-        if _relative(p) not in PENDING
-        and p != Path(__file__).resolve()
-        and (f := _history_faults(p))
+        if p != Path(__file__).resolve() and (f := _history_faults(p))
     }
     assert not faults, "\n".join(f"{path}: {'; '.join(f)}" for path, f in faults.items())
-
-
-@pytest.mark.parametrize("name", sorted(PENDING))
-def test_pending_files_still_need_the_exemption(name):
-    """Empty PENDING as the files are restructured: a pending file that passes both checks
-    must leave the set (so that it stays checked from then on)."""
-    path = ROOT / name
-    assert path.exists(), f"{name} is gone: remove it from PENDING"
-    assert _shape_faults(path) or _history_faults(path), (
-        f"{name} passes now: remove it from PENDING"
-    )
