@@ -1,4 +1,4 @@
-"""The code reads like its paper: no function in windbench/ over 100 lines or with more than
+"""The code reads like its paper: no function in windbench/ over 80 lines or with more than
 12 parameters, no module docstring over 40 lines (what and why, with the equations; the
 measurements live in experiments/), and no development history in the tree (issue
 numbers, numbered work periods: that is what git history is for)."""
