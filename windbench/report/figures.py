@@ -277,12 +277,30 @@ def _draw_bodies_xy(ax, scene: Scene, z: float):
             ax.add_patch(
                 Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fc="0.5", ec="k", lw=0.6)
             )
+        elif body.kind == "mesh":
+            _mesh_section_xy(ax, body, lo, hi, z)
         else:  # capsule or cylinder: its axis where it crosses the height z
             p = np.asarray(body.params)
             a, b = p[0:3], p[3:6]
             f = np.clip((z - a[2]) / (b[2] - a[2]), 0.0, 1.0) if b[2] != a[2] else 0.0
             c = a + f * (b - a)
             ax.add_patch(Circle((c[0], c[1]), max(p[6], 0.04), fc="0.3", ec="k", lw=0.6))
+
+
+SECTION_POINTS = 160  # samples per side of a mesh body's section
+
+
+def _mesh_section_xy(ax, body, lo, hi, z: float) -> None:
+    """A mesh body's cross-section at height z: where its signed distance is negative."""
+    x = np.linspace(lo[0], hi[0], SECTION_POINTS)
+    y = np.linspace(lo[1], hi[1], SECTION_POINTS)
+    xx, yy = np.meshgrid(x, y)
+    points = np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)])
+    d = body.distance(points)[0].reshape(xx.shape)
+    if d.min() >= 0.0:
+        return
+    ax.contourf(xx, yy, d, levels=[d.min() - 1.0, 0.0], colors=["0.3"])
+    ax.contour(xx, yy, d, levels=[0.0], colors="k", linewidths=0.6)
 
 
 def _view_box(scene: Scene, positions: Sequence[np.ndarray], margin: float = 0.4):
