@@ -116,24 +116,24 @@ class NavierStokesConfig(WindConfig):
 
 
 def _check(params):
-    name = str(params.get("advection"))
-    if name not in ADVECTION:
-        raise ConfigError("wind.advection", f"must be one of {list(ADVECTION)}, got {name!r}")
-    name = str(params.get("coupling"))
-    if name not in COUPLING:
-        raise ConfigError("wind.coupling", f"must be one of {list(COUPLING)}, got {name!r}")
-    if name == "projection" and str(params.get("advection")) == "second_order":
+    choices = (
+        ("advection", ADVECTION),
+        ("coupling", COUPLING),
+        ("precision", PRECISION),
+        ("turbulence", TURBULENCE),
+    )
+    for key, allowed in choices:
+        name = str(params.get(key))
+        if name not in allowed:
+            raise ConfigError(f"wind.{key}", f"must be one of {list(allowed)}, got {name!r}")
+    if str(params.get("coupling")) == "projection" and str(params.get("advection")) == (
+        "second_order"
+    ):
         raise ConfigError(
             "wind.coupling",
             "projection works with wind.advection semi_lagrangian or maccormack, not "
             "second_order (its projection carries half the pressure to the next step)",
         )
-    name = str(params.get("precision"))
-    if name not in PRECISION:
-        raise ConfigError("wind.precision", f"must be one of {list(PRECISION)}, got {name!r}")
-    name = str(params.get("turbulence"))
-    if name not in TURBULENCE:
-        raise ConfigError("wind.turbulence", f"must be one of {list(TURBULENCE)}, got {name!r}")
     cs = float(params.get("smagorinsky_constant"))
     if not (np.isfinite(cs) and 0 < cs < 1):
         raise ConfigError("wind.smagorinsky_constant", f"must lie in (0, 1), got {cs}")
