@@ -94,8 +94,9 @@ def prepare(cfg: DictConfig) -> RunSetup:
     """
     check_values(cfg)
     dt = float(cfg.sim.dt)
-    for key in ("duration", "spinup"):  # a bad number is refused before any mesh is built
-        _seconds(cfg.sim[key], f"sim.{key}", math.nan)
+    # a bad number is refused before any mesh is built
+    _seconds(cfg.sim.duration, "sim.duration", math.nan, positive=True)
+    _seconds(cfg.sim.spinup, "sim.spinup", math.nan)
     check_filename(str(cfg.output.filename))
     runtime.thread_count(cfg.runtime.threads)  # a bad runtime.threads: refused now
     backend = backend_class(cfg.wind.name)  # unknown backend: error listing the allowed ones
@@ -194,16 +195,15 @@ def _auto_duration(scene: Scene) -> float:
     return max(window, MIN_WINDOW)
 
 
-def _seconds(value, key: str, auto: float) -> float:
+def _seconds(value, key: str, auto: float, positive: bool = False) -> float:
     """``value`` of ``key`` in seconds: ``auto`` becomes ``auto``; anything else must be a
-    finite number >= 0 (a duration > 0)."""
+    finite number >= 0 (> 0 where ``positive``)."""
     if str(value) == "auto":
         return auto
     try:
         seconds = float(value)
     except (TypeError, ValueError):
         seconds = math.nan
-    positive = key == "sim.duration"
     _require(
         np.isfinite(seconds) and (seconds > 0 if positive else seconds >= 0),
         key,
@@ -215,7 +215,7 @@ def _seconds(value, key: str, auto: float) -> float:
 def _recorded_steps(sim, scene: Scene) -> int:
     """Steps recorded after the spin-up: ``sim.duration / sim.dt``, at most ``sim.max_steps``."""
     dt = float(sim.dt)
-    duration = _seconds(sim.duration, "sim.duration", _auto_duration(scene))
+    duration = _seconds(sim.duration, "sim.duration", _auto_duration(scene), positive=True)
     _require(duration >= dt, "sim.duration", f"must be at least sim.dt = {dt} s, got {duration}")
     n_steps = int(round(duration / dt))
     _require(
