@@ -6,8 +6,9 @@ Reads the report's ``summary.csv`` and ``references.csv`` and rewrites the block
 ``<!-- results:start -->`` and ``<!-- results:end -->`` in README.md: per paper scene the
 lee error of each backend at the finest compared resolution against the scene's reference
 (mean over time steps and seeds), the reference's own uncertainty (GCI), the lee force
-ratio of the sheltered flag, and the cost in wall seconds per simulated second. Nothing in
-that block is written by hand.
+ratio of the sheltered flag, and the cost in wall seconds per simulated second; then how
+long the comparison's sweeps took (the last measurement of each in
+``experiments/results/paper_comparison_time.csv``). Nothing in that block is written by hand.
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ from windbench.report.comparison import own_cost
 ROOT = Path(__file__).resolve().parents[1]
 START, END = "<!-- results:start -->", "<!-- results:end -->"
 BACKENDS = ("global", "particles", "particles/mixing", "navier_stokes")
+TIMES = ROOT / "experiments" / "results" / "paper_comparison_time.csv"
+SWEEPS = ("paper", "paper_seeds", "paper_mixing", "fence", "fence_mixing")  # the report's runs
 LEE_MODEL = "wind.lee_model"  # the particles' lee model: paper (default) or mixing
 
 
@@ -52,6 +55,20 @@ def results_table(summary: pd.DataFrame, references: pd.DataFrame) -> str:
     return "\n".join(rows)
 
 
+def sweep_time(times: pd.DataFrame) -> str:
+    """One sentence: the comparison sweeps' total wall time, launcher and code (last rows)."""
+    last = times[times["sweep"].isin(SWEEPS)].drop_duplicates("sweep", keep="last")
+    launchers = ", ".join(sorted(set(last["launcher"])))
+    codes = ", ".join(sorted(set(last["code"])))
+    return (
+        f"The {len(last)} comparison sweeps ({int(last['runs'].sum())} runs) took "
+        f"{last['wall_seconds'].sum() / 60:.3g} min on 2 cores ({launchers}; concurrent load: "
+        f"{'; '.join(sorted(set(last['concurrent'])))}; code {codes}); the references are "
+        "separate runs, reused by every comparison "
+        f"(`{TIMES.relative_to(ROOT)}`)."
+    )
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--report", type=Path, default=ROOT / "reports" / "paper")
@@ -65,7 +82,7 @@ def main():
         "against the scene's second-order reference, over U_ref, steady-window means; cost: "
         "median time per step over dt, wall time or the CPU time of a one-thread run that "
         "shared its cores):\n\n"
-        f"{results_table(summary, references)}\n{END}"
+        f"{results_table(summary, references)}\n\n{sweep_time(pd.read_csv(TIMES))}\n{END}"
     )
     readme = ROOT / "README.md"
     text = readme.read_text()
