@@ -1,0 +1,162 @@
+"""Navier-Stokes step time with and without a CPU-bound neighbour on one core.
+
+A run's parallel kernels share the machine with whatever else runs. With spinning worker
+threads a busy neighbour on one core can slow a step several-fold (every parallel region
+waits for its slowest thread). This benchmark measures how much a step slows:
+
+    PYTHONPATH=. python experiments/bench_contention.py [--resolution 64] [--steps 10]
+        [--rounds 3] [--threads auto 1]
+    PYTHONPATH=. python experiments/bench_contention.py --launchers [--sweep 48 64 80 96]
+
+For each thread setting it builds the ``experiment=scaling`` fence (resolution^3 cells,
+``navier_stokes``), then alternates rounds of ``--steps`` steps alone and ``--steps`` steps
+beside a ``while True: pass`` process, so that a drift of the machine hits both alike.
+Writes experiments/results/bench_contention.csv: per thread setting the median step alone,
+the median step beside the busy process, their ratio, and the load average before and after
+(the busy process adds 1 to it; the idle rounds are only idle if the machine is).
+
+``--launchers`` runs the ``experiment=scaling`` Navier-Stokes sweep over ``--sweep``
+resolutions three times: the basic launcher (one run at a time, ``runtime.threads=auto``:
+every core), the joblib launcher with ``n_jobs=2`` (two runs at once, one thread each) and
+the basic launcher with ``runtime.threads=1`` (each run alone on one core: the idle
+one-core time). It writes experiments/results/bench_launchers.csv: each sweep's wall time
+and, per run, the median step and its ratio to the same run alone on one core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from experiments.bench_ns import Variant
+from windbench.runtime import load_average, thread_count, use_threads
+
+RESULTS = Path(__file__).parent / "results"
+OUT = RESULTS / "bench_contention.csv"
+LAUNCHERS = {
+    "basic": [],
+    "joblib_2": ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
+    "basic_1thread": ["runtime.threads=1"],
+}
+BUSY = "while True: pass"
+SETTLE = 0.5  # s: let the scheduler place the busy process before timing
+
+
+def timed_steps(variant: Variant, steps: int) -> list[float]:
+    """Wall seconds of each of ``steps`` backend steps."""
+    variant.rows.clear()
+    for _ in range(steps):
+        variant.step()
+    return [r["step"] for r in variant.rows]
+
+
+def beside_busy(variant: Variant, steps: int) -> list[float]:
+    """As :func:`timed_steps` while one CPU-bound process runs."""
+    busy = subprocess.Popen([sys.executable, "-c", BUSY])
+    try:
+        time.sleep(SETTLE)
+        return timed_steps(variant, steps)
+    finally:
+        busy.kill()
+        busy.wait()
+
+
+def measure(setting, args) -> dict:
+    threads = use_threads(thread_count(setting))
+    variant = Variant(args.resolution, "float64", "semi_lagrangian", None)
+    load0 = load_average()[0]
+    alone, busy = [], []
+    for _ in range(args.rounds):
+        alone += timed_steps(variant, args.steps)
+        busy += beside_busy(variant, args.steps)
+    a, b = float(np.median(alone)), float(np.median(busy))
+    return {
+        "resolution": args.resolution,
+        "runtime_threads": str(setting),
+        "threads": threads,
+        "steps_per_round": args.steps,
+        "rounds": args.rounds,
+        "alone_step_seconds": a,
+        "busy_step_seconds": b,
+        "ratio": b / a,
+        "load_before": load0,
+        "load_after": load_average()[0],
+    }
+
+
+def sweep(name: str, resolutions, folder: Path) -> tuple[float, pd.DataFrame]:
+    """Run the scaling sweep with launcher ``name``: (wall seconds, median step per run)."""
+    out = folder / name
+    cmd = ["windbench", "-m", "experiment=scaling", "wind=navier_stokes",
+           f"grid.resolution={','.join(map(str, resolutions))}", f"hydra.sweep.dir={out}",
+           *LAUNCHERS[name]]  # fmt: skip
+    start = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True)
+    wall = time.perf_counter() - start
+    runs = collect(out)
+    return wall, runs
+
+
+def collect(folder: Path) -> pd.DataFrame:
+    """Resolution, median step (first excluded) and threads of each run under ``folder``."""
+    import xarray as xr
+
+    rows = []
+    for path in sorted(folder.glob("*/windbench.nc")):
+        with xr.open_dataset(path) as ds:
+            names = [str(p) for p in ds["phase"].values]
+            steps = ds["step_seconds"].values[1:, names.index("total")]
+            rows.append({
+                "resolution": int(ds.attrs["grid_shape"][0]),
+                "step_seconds": float(np.median(steps)),
+                "threads": int(ds.attrs.get("numba_threads", 0)),
+            })  # fmt: skip
+    return pd.DataFrame(rows).set_index("resolution")
+
+
+def launchers(args) -> pd.DataFrame:
+    """The three sweeps of ``--launchers``, one after the other."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        results = {name: sweep(name, args.sweep, Path(tmp)) for name in LAUNCHERS}
+    alone = results["basic_1thread"][1]["step_seconds"]
+    rows = []
+    for name, (wall, runs) in results.items():
+        for res, run in runs.iterrows():
+            rows.append({
+                "launcher": name, "sweep_wall_seconds": wall, "resolution": res,
+                "threads": run["threads"], "step_seconds": run["step_seconds"],
+                "ratio_to_alone_one_core": run["step_seconds"] / alone[res],
+                "load_after": load_average()[0],
+            })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--resolution", type=int, default=64)
+    parser.add_argument("--steps", type=int, default=10)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--threads", nargs="+", default=["auto", "1"])
+    parser.add_argument("--launchers", action="store_true")
+    parser.add_argument("--sweep", type=int, nargs="+", default=[48, 64, 80, 96])
+    args = parser.parse_args()
+    if args.launchers:
+        table, out = launchers(args), RESULTS / "bench_launchers.csv"
+    else:
+        rows = [measure(s if s == "auto" else int(s), args) for s in args.threads]
+        table, out = pd.DataFrame(rows), OUT
+    print(table.to_string(index=False))
+    table.to_csv(out, index=False)
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
