@@ -66,14 +66,16 @@ _KEYS = {
 class BodyTable(NamedTuple):
     """The bodies as the kernels read them: ``kinds`` (m,), ``params`` (m, 7),
     ``fields``, the mesh bodies' distance lattices one after another (:meth:`SDFLattice.entry`),
-    ``moving`` (m,) whether body b has a motion, and ``poses`` (m, 2 POSE_WIDTH), the state:
-    its current pose row, then the previous one (:func:`set_poses`)."""
+    ``moving`` (m,) whether body b has a motion; the state: ``poses`` (m, 2 POSE_WIDTH), its
+    current pose row, then the previous one (:func:`set_poses`), and ``track`` (k, m,
+    POSE_WIDTH), poses at the coming substeps of the cloth (:func:`set_track`)."""
 
     kinds: np.ndarray
     params: np.ndarray
     fields: np.ndarray
     moving: np.ndarray
     poses: np.ndarray
+    track: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -185,8 +187,9 @@ def _tabulated(path: str, mtime: int, size: int, placement: Placement, spacing: 
     return vertices, triangles, sdf_lattice(vertices, triangles, spacing)
 
 
-def body_table(bodies: Sequence[Body], time: float = 0.0) -> BodyTable:
-    """The :class:`BodyTable` of ``bodies`` for the numba kernels, posed at ``time`` (s)."""
+def body_table(bodies: Sequence[Body], time: float = 0.0, track: int = 1) -> BodyTable:
+    """The :class:`BodyTable` of ``bodies`` for the numba kernels, posed at ``time`` (s),
+    with room for ``track`` poses per body (:func:`set_track`)."""
     kinds = np.array([b.kind_id for b in bodies], dtype=np.int64)
     params = np.array([b.params for b in bodies], dtype=np.float64).reshape(len(bodies), N_PARAMS)
     entries, offset = [], 0
@@ -197,7 +200,10 @@ def body_table(bodies: Sequence[Body], time: float = 0.0) -> BodyTable:
             offset += entries[-1].size
     fields = np.concatenate(entries) if entries else np.zeros(0)
     moving = np.array([b.motion is not None for b in bodies], dtype=np.bool_)
-    table = BodyTable(kinds, params, fields, moving, np.zeros((len(bodies), 2 * POSE_WIDTH)))
+    poses = np.zeros((len(bodies), 2 * POSE_WIDTH))
+    table = BodyTable(
+        kinds, params, fields, moving, poses, np.zeros((track, len(bodies), POSE_WIDTH))
+    )
     set_poses(table, bodies, time)
     set_poses(table, bodies, time)  # previous = current: no motion yet
     return table
@@ -210,6 +216,14 @@ def set_poses(table: BodyTable, bodies: Sequence[Body], time: float) -> None:
         if body.motion is not None:
             table.poses[b, POSE_WIDTH:] = table.poses[b, :POSE_WIDTH]
             table.poses[b, :POSE_WIDTH] = body.motion.pose(time).row()
+
+
+def set_track(table: BodyTable, bodies: Sequence[Body], times) -> None:
+    """``track[k]`` = the moving bodies' pose rows at ``times[k]`` (s), in place."""
+    for b, body in enumerate(bodies):
+        if body.motion is not None:
+            for k, t in enumerate(times):
+                table.track[k, b] = body.motion.pose(float(t)).row()
 
 
 def distances(bodies: Sequence[Body], points, time: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
