@@ -236,6 +236,22 @@ def distances(bodies: Sequence[Body], points, time: float = 0.0) -> tuple[np.nda
     return dist, normal
 
 
+def body_velocity(bodies: Sequence[Body], points, time: float) -> np.ndarray:
+    """(n, 3) velocity at ``time`` (s) of the body nearest each point (the one it lies in):
+    c' + omega x (x - c) of a moving body (:meth:`~windbench.geometry.motion.Pose.point_velocity`),
+    0 of a still one."""
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    velocity = np.zeros(pts.shape)
+    if not bodies or not pts.size:
+        return velocity
+    nearest = np.argmin([distances([b], pts, time)[0] for b in bodies], axis=0)
+    for b, body in enumerate(bodies):
+        here = nearest == b
+        if body.motion is not None and here.any():
+            velocity[here] = body.motion.pose(time).point_velocity(pts[here])
+    return velocity
+
+
 def inside(bodies: Sequence[Body], points, time: float = 0.0) -> np.ndarray:
     """Boolean mask: points strictly inside any body (posed at ``time``, s)."""
     if not bodies:
