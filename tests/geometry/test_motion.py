@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
+from windbench.cli import compose_config
 from windbench.errors import ConfigError
 from windbench.geometry.bodies import body_from_config, body_table, distances, set_poses
 from windbench.geometry.motion import axis_rotation, motion_from_config
+from windbench.scenes import build_scene
 
 BOX = {"type": "box", "min": [0, 0, 0], "max": [2, 1, 1]}
 KEYS = {"type": "keyframes", "times": [1.0, 3.0], "positions": [[0, 0, 0], [2, 0, 0]]}
@@ -91,3 +93,15 @@ def test_a_plane_needs_a_pivot_for_keyframes():
     plane = {"type": "plane", "point": [0, 0, 0], "normal": [0, 0, 1]}
     with pytest.raises(ConfigError, match=r"p.motion.pivot: is required"):
         body_from_config({**plane, "motion": KEYS}, "p")
+
+
+def test_the_turning_shirt_scene_ends_facing_into_its_wind():
+    """conf/scene/shirt_turning: the character (its mesh faces -x) stands side-on to the
+    wind at first and faces into it, against the source's velocity, after the turn."""
+    scene = build_scene(compose_config(["scene=shirt_turning"]).scene)
+    motion = scene.bodies[0].motion
+    wind = np.asarray(scene.sources[0].velocity)
+    into_wind = -wind / np.linalg.norm(wind)
+    facing = [motion.pose(t).rotation @ [-1.0, 0.0, 0.0] for t in (0.0, motion.times[-1])]
+    assert abs(facing[0] @ into_wind) < 1e-12
+    np.testing.assert_allclose(facing[1], into_wind, atol=1e-12)
