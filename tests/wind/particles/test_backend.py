@@ -337,8 +337,8 @@ def test_particles_meet_a_placed_body_where_its_pose_puts_it():
 
 
 def test_a_turning_body_moves_its_solid_cells_and_its_lee():
-    """A box turning about a vertical axis: the solid cells and the cells the particles
-    cannot reach follow its current pose (u = 0 deep inside it)."""
+    """A box turning about a vertical axis: the solid cells follow its current pose, u = 0
+    deep inside it, and the particles it sweeps over are pushed out, not left inside."""
     spin = {"type": "rotation", "axis": [0, 0, 1], "point": [2, 1, 1], "angular_speed": 1.5}
     box = {"type": "box", "min": [1.2, 0.8, 0.4], "max": [2.8, 1.2, 1.6], "motion": spin}
     scene = scene_of([{"type": "uniform", "velocity": [5.0, 0.0, 0.0]}], [box])
@@ -353,3 +353,4 @@ def test_a_turning_body_moves_its_solid_cells_and_its_lee():
     )
     assert deep.sum() >= 8 and not _deep_cells(scene.bodies, grid, 0.0)[deep].all()
     assert_all(wind.velocity()[deep], [0.0, 0.0, 0.0])
+    assert (distances(scene.bodies, wind.particles[0], t)[0] >= 0.0).all()  # none swept in

@@ -464,7 +464,10 @@ class ParticleWind(WindField):
             t = self.state.time + dt
             self.pose_solid(t)
             solid = self.solid_mask().reshape(-1)
-            tables = follow_bodies(self.model.tables, self.scene.bodies, t, self.state.cells, solid)
+            st = self.state
+            tables = follow_bodies(
+                self.model.tables, self.scene.bodies, t, (st.cells, st.particles, st.n), solid
+            )
             self.model = replace(self.model, tables=tables)
         self.state, self._stats = advance(self.model, self.state, self.workspace, dt, obstacles)
 

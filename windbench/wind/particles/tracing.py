@@ -332,13 +332,33 @@ def _posed_first_hit(table, b, a, e, scratch, normal):
     return s
 
 
-def follow_bodies(model: GustModel, bodies, time: float, cells: CellState, solid) -> GustModel:
+@njit(cache=True)
+def push_out_particles(table, positions, n, delta):
+    """Particles 0..n-1 that a moving body of the table has swept over are moved out along
+    its normal to ``delta`` outside its surface: p += (delta - d) n (the body carries them,
+    as a hit stops a particle there)."""
+    normal = np.empty(3)
+    for q in range(n):
+        for b in range(table.kinds.shape[0]):
+            if not table.moving[b]:
+                continue
+            px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
+            d = table_distance(table, b, px, py, pz, normal)
+            if d < 0.0:
+                for k in range(3):
+                    positions[q, k] += (delta - d) * normal[k]
+
+
+def follow_bodies(model: GustModel, bodies, time: float, state, solid) -> GustModel:
     """Pose the moving ``bodies`` at ``time`` (s) and register them again
-    (:func:`register_bodies`); the cells' SOLID and BODIES flags follow, and a cell the
-    bodies now cover (``solid``, (n_cells,) bool) holds no wind. Returns the model with the
-    new registration (the table's poses change in place)."""
+    (:func:`register_bodies`); the cells' SOLID and BODIES flags follow, a cell the bodies
+    now cover (``solid``, (n_cells,) bool) holds no wind and the particles they swept over
+    are pushed out (:func:`push_out_particles`). ``state`` = (cells, particles, n). Returns
+    the model with the new registration (the table's poses change in place)."""
+    cells, particles, n = state
     table = model.bodies.table
     set_poses(table, bodies, time)
+    push_out_particles(table, particles.positions, n, model.rules.delta)
     start, items = register_bodies(table, model.grid)
     cells.flags[:] &= np.uint8(~(SOLID | BODIES) & 0xFF)
     cells.flags[solid] |= SOLID
