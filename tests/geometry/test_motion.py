@@ -5,7 +5,15 @@ import pytest
 
 from windbench.cli import compose_config
 from windbench.errors import ConfigError
-from windbench.geometry.bodies import body_from_config, body_table, distances, set_poses
+from windbench.geometry.bodies import (
+    MOVING,
+    POSE,
+    PREVIOUS,
+    body_from_config,
+    body_table,
+    distances,
+    set_poses,
+)
 from windbench.geometry.motion import axis_rotation, motion_from_config
 from windbench.scenes import build_scene
 
@@ -62,11 +70,11 @@ def test_a_still_body_reads_as_before_and_poses_advance():
     spin = {"type": "rotation", "axis": [0, 0, 1], "point": [0, 0, 0], "angular_speed": 1.0}
     moving = body_from_config({**BOX, "motion": spin}, "m")
     table = body_table([still, moving], time=0.0)
-    assert table.moving.tolist() == [False, True]
-    np.testing.assert_array_equal(table.poses[0], 0.0)
+    assert table.params[:, MOVING].tolist() == [0.0, 1.0]
+    np.testing.assert_array_equal(table.params[0, MOVING:], 0.0)
     set_poses(table, [still, moving], 0.5)
-    np.testing.assert_array_equal(table.poses[1, 12:], moving.motion.pose(0.0).row())
-    np.testing.assert_array_equal(table.poses[1, :12], moving.motion.pose(0.5).row())
+    np.testing.assert_array_equal(table.params[1, PREVIOUS:], moving.motion.pose(0.0).row())
+    np.testing.assert_array_equal(table.params[1, POSE:PREVIOUS], moving.motion.pose(0.5).row())
 
 
 @pytest.mark.parametrize(

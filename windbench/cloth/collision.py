@@ -25,8 +25,11 @@ import numpy as np
 from numba import njit
 
 from windbench.geometry.bodies import (
+    POSE,
+    PREVIOUS,
     Body,
-    nearest_body,
+    is_moving,
+    moving_body_at,
     surface_displacement,
     union_distance_point,
 )
@@ -52,10 +55,10 @@ def follow_track(bodies, k, clearance):
     ``track[k + 1]`` (the table's ``track``, (substeps + 1, m, POSE_WIDTH)); every clearance
     is reset (a body may have come closer)."""
     for b in range(bodies.kinds.shape[0]):
-        if bodies.moving[b]:
+        if is_moving(bodies, b):
             for j in range(POSE_WIDTH):
-                bodies.poses[b, POSE_WIDTH + j] = bodies.track[k, b, j]
-                bodies.poses[b, j] = bodies.track[k + 1, b, j]
+                bodies.params[b, PREVIOUS + j] = bodies.track[k, b, j]
+                bodies.params[b, POSE + j] = bodies.track[k + 1, b, j]
     clearance[:] = 0.0
 
 
@@ -79,15 +82,15 @@ def project_vertex(bodies, margin, friction, x_prev, p, normal):
     d = sdf(p) - margin < 0  ->  p += -d n;  tangential move dt limited by mu |d|.
     Returns d (how far p lay outside the margin; negative: how deep it lay inside).
     """
-    d, b = nearest_body(bodies, p[0], p[1], p[2], normal)
-    d -= margin
+    d = union_distance_point(bodies, p[0], p[1], p[2], normal) - margin
     if d >= 0.0:
         return d
+    b = moving_body_at(bodies, p[0], p[1], p[2], d + margin)
     for k in range(3):
         p[k] -= d * normal[k]
     # tangential displacement over the substep, relative to a moving body's surface
     ox, oy, oz = x_prev[0], x_prev[1], x_prev[2]
-    if bodies.moving[b]:
+    if b >= 0:
         carried = np.empty(3)
         surface_displacement(bodies, b, p[0], p[1], p[2], carried)
         ox, oy, oz = ox + carried[0], oy + carried[1], oz + carried[2]

@@ -64,7 +64,7 @@ from windbench.cloth.constraints import (
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
-from windbench.geometry.bodies import BodyTable, body_table, set_track
+from windbench.geometry.bodies import MOVING, BodyTable, body_table, set_track
 
 BEND_EVERY = 2  # soft hinges are projected every BEND_EVERY-th substep ...
 BEND_RESOLVED = 0.04  # ... when (omega BEND_EVERY h)^2 <= this for every hinge
@@ -259,7 +259,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     vv[:] = v
     normal = np.empty(3)
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
-    moving = np.any(model.contacts.bodies.moving)
+    moving = np.any(model.contacts.bodies.params[:, MOVING] != 0.0)
     for sub in range(s.substeps):
         if moving:  # the bodies' poses at the substep's end (collision.follow_track)
             follow_track(model.contacts.bodies, sub, clear[1])

@@ -25,8 +25,9 @@ Every body may set ``name``, ``resolve`` (default true) and ``motion``. ``resolv
 marks a body thinner than any sensible wind cell (a flag pole): cloth collides with it, but
 the run does not demand that the wind grid hold a cell inside it. ``motion`` makes the body
 kinematic (:mod:`windbench.geometry.motion`): its config places it at rest and the table's
-``poses`` carry it, row b the current and the previous pose (:func:`set_poses`); a still
-body (``moving[b]`` false) is read at its rest place as before.
+poses carry it: row b of the table's ``params`` holds after its 7 parameters a moving flag
+and the current and the previous pose (:func:`set_poses`); a still body (flag 0) is read
+at its rest place as before.
 """
 
 from __future__ import annotations
@@ -53,6 +54,10 @@ from windbench.geometry.triangle_mesh import (
 BOX, CAPSULE, CYLINDER, PLANE, MESH = 0, 1, 2, 3, 4
 KINDS = {"box": BOX, "capsule": CAPSULE, "cylinder": CYLINDER, "plane": PLANE, "mesh": MESH}
 N_PARAMS = 7
+MOVING = N_PARAMS  # params column: 1 for a moving body, 0 for a still one
+POSE = MOVING + 1  # params columns of the current pose row ...
+PREVIOUS = POSE + POSE_WIDTH  # ... and of the previous one
+ROW = PREVIOUS + POSE_WIDTH
 MESH_SPACING = 0.01  # m: the SDF lattice of a mesh body; error ~ h^2 / (4 r) on radius r
 _KEYS = {
     "box": ("min", "max"),
@@ -66,15 +71,14 @@ _KEYS = {
 class BodyTable(NamedTuple):
     """The bodies as the kernels read them: ``kinds`` (m,), ``params`` (m, 7),
     ``fields``, the mesh bodies' distance lattices one after another (:meth:`SDFLattice.entry`),
-    ``moving`` (m,) whether body b has a motion; the state: ``poses`` (m, 2 POSE_WIDTH), its
-    current pose row, then the previous one (:func:`set_poses`), and ``track`` (k, m,
-    POSE_WIDTH), poses at the coming substeps of the cloth (:func:`set_track`)."""
+    and ``track`` (k, m, POSE_WIDTH), the poses at the cloth's coming substeps
+    (:func:`set_track`). A row of ``params`` (ROW wide) holds the body's N_PARAMS
+    parameters, at MOVING 1 for a moving body, and the state of one: its current pose row
+    at POSE, the previous one at PREVIOUS (:func:`set_poses`)."""
 
     kinds: np.ndarray
     params: np.ndarray
     fields: np.ndarray
-    moving: np.ndarray
-    poses: np.ndarray
     track: np.ndarray
 
 
@@ -191,7 +195,9 @@ def body_table(bodies: Sequence[Body], time: float = 0.0, track: int = 1) -> Bod
     """The :class:`BodyTable` of ``bodies`` for the numba kernels, posed at ``time`` (s),
     with room for ``track`` poses per body (:func:`set_track`)."""
     kinds = np.array([b.kind_id for b in bodies], dtype=np.int64)
-    params = np.array([b.params for b in bodies], dtype=np.float64).reshape(len(bodies), N_PARAMS)
+    params = np.zeros((len(bodies), ROW))
+    params[:, :N_PARAMS] = np.array([b.params for b in bodies]).reshape(len(bodies), N_PARAMS)
+    params[:, MOVING] = [b.motion is not None for b in bodies]
     entries, offset = [], 0
     for b, body in enumerate(bodies):
         if body.lattice is not None:
@@ -199,11 +205,7 @@ def body_table(bodies: Sequence[Body], time: float = 0.0, track: int = 1) -> Bod
             entries.append(body.lattice.entry())
             offset += entries[-1].size
     fields = np.concatenate(entries) if entries else np.zeros(0)
-    moving = np.array([b.motion is not None for b in bodies], dtype=np.bool_)
-    poses = np.zeros((len(bodies), 2 * POSE_WIDTH))
-    table = BodyTable(
-        kinds, params, fields, moving, poses, np.zeros((track, len(bodies), POSE_WIDTH))
-    )
+    table = BodyTable(kinds, params, fields, np.zeros((track, len(bodies), POSE_WIDTH)))
     set_poses(table, bodies, time)
     set_poses(table, bodies, time)  # previous = current: no motion yet
     return table
@@ -214,8 +216,8 @@ def set_poses(table: BodyTable, bodies: Sequence[Body], time: float) -> None:
     becomes the previous one (a still body keeps its zero rows)."""
     for b, body in enumerate(bodies):
         if body.motion is not None:
-            table.poses[b, POSE_WIDTH:] = table.poses[b, :POSE_WIDTH]
-            table.poses[b, :POSE_WIDTH] = body.motion.pose(time).row()
+            table.params[b, PREVIOUS:ROW] = table.params[b, POSE:PREVIOUS]
+            table.params[b, POSE:PREVIOUS] = body.motion.pose(time).row()
 
 
 def set_track(table: BodyTable, bodies: Sequence[Body], times) -> None:
@@ -354,6 +356,12 @@ def rest_distance(table, b, px, py, pz, normal):
 
 
 @njit(cache=True, inline="always")
+def is_moving(table, b):
+    """Whether body b of a :class:`BodyTable` moves (its params' MOVING column)."""
+    return table.params[b, MOVING] != 0.0
+
+
+@njit(cache=True, inline="always")
 def to_rest(pose, px, py, pz):
     """x0 = R^T (x - T) of a pose row (R row-major, T): a world point in the rest frame."""
     dx, dy, dz = px - pose[9], py - pose[10], pz - pose[11]
@@ -367,10 +375,20 @@ def to_rest(pose, px, py, pz):
 @njit(cache=True)
 def table_distance(table, b, px, py, pz, normal):
     """Signed distance from p to body b of a :class:`BodyTable`, outward normal in ``normal``:
-    a still body's :func:`rest_distance`; a moving one's d0(R^T (x - T)), normal R n0."""
-    if not table.moving[b]:
-        return rest_distance(table, b, px, py, pz, normal)
-    pose = table.poses[b]
+    a still body's :func:`rest_distance`; a moving one's :func:`posed_distance`."""
+    if is_moving(table, b):
+        return posed_distance(table, b, px, py, pz, normal)
+    if table.kinds[b] == MESH:  # rest_distance written out: the still path stays inlinable
+        return lattice_distance(table.fields, table.params[b], px, py, pz, normal)
+    return body_distance(table.kinds[b], table.params[b], px, py, pz, normal)
+
+
+@njit(cache=True)
+def posed_distance(table, b, px, py, pz, normal):
+    """:func:`rest_distance` of moving body b at its current pose: d0(R^T (x - T)), the
+    normal turned forward, R n0 (a call of its own, so that the still bodies' path stays
+    small enough to inline)."""
+    pose = table.params[b, POSE:PREVIOUS]
     qx, qy, qz = to_rest(pose, px, py, pz)
     d = rest_distance(table, b, qx, qy, qz, normal)
     nx, ny, nz = normal[0], normal[1], normal[2]
@@ -384,34 +402,38 @@ def table_distance(table, b, px, py, pz, normal):
 def surface_displacement(table, b, px, py, pz, out):
     """out = how far the point of moving body b now at p moved with the body since the
     previous pose: p - (R_prev R^T (p - T) + T_prev)."""
-    qx, qy, qz = to_rest(table.poses[b], px, py, pz)
-    prev = table.poses[b, POSE_WIDTH:]
+    qx, qy, qz = to_rest(table.params[b, POSE:PREVIOUS], px, py, pz)
+    prev = table.params[b, PREVIOUS:ROW]
     out[0] = px - (prev[0] * qx + prev[1] * qy + prev[2] * qz + prev[9])
     out[1] = py - (prev[3] * qx + prev[4] * qy + prev[5] * qz + prev[10])
     out[2] = pz - (prev[6] * qx + prev[7] * qy + prev[8] * qz + prev[11])
 
 
 @njit(cache=True)
-def nearest_body(table, px, py, pz, normal):
-    """(signed distance to the nearest body of a :class:`BodyTable`, its index); the normal
-    of that one in ``normal``."""
+def union_distance_point(table, px, py, pz, normal):
+    """Signed distance to the nearest body of a :class:`BodyTable`, normal of that one."""
     normal[0], normal[1], normal[2] = 0.0, 0.0, 1.0
     if table.kinds.shape[0] == 1:  # one body: no scratch to allocate (a contact's hot path)
-        return table_distance(table, 0, px, py, pz, normal), 0
-    best, nearest = np.inf, -1
+        return table_distance(table, 0, px, py, pz, normal)
+    best = np.inf
     tmp = np.empty(3)
     for b in range(table.kinds.shape[0]):
         d = table_distance(table, b, px, py, pz, tmp)
         if d < best:
-            best, nearest = d, b
+            best = d
             normal[0], normal[1], normal[2] = tmp[0], tmp[1], tmp[2]
-    return best, nearest
+    return best
 
 
 @njit(cache=True)
-def union_distance_point(table, px, py, pz, normal):
-    """Signed distance to the nearest body of a :class:`BodyTable`, normal of that one."""
-    return nearest_body(table, px, py, pz, normal)[0]
+def moving_body_at(table, px, py, pz, distance):
+    """The moving body of a :class:`BodyTable` whose signed distance at p is ``distance``
+    (the union's, :func:`union_distance_point`: p's nearest body), or -1 if it is still."""
+    tmp = np.empty(3)
+    for b in range(table.kinds.shape[0]):
+        if is_moving(table, b) and table_distance(table, b, px, py, pz, tmp) == distance:
+            return b
+    return -1
 
 
 @njit(cache=True)

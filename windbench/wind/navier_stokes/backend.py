@@ -29,7 +29,8 @@ source only where it blows in, with its inflow ``turbulence`` if it has one and 
 a net volume flux turns its inflow faces into openings (pressure zero). The initial
 field is the superposed sources, zero at bodies, projected. Cells whose centre lies in a
 rigid body are solid: every face touching one has zero velocity (the paper's interior
-check), or a moving body's velocity there (:meth:`NavierStokesWind._move_bodies`). ``wind.precision=float32`` stores the velocity, its scratch and the pressure solve's
+check), or a moving body's velocity there (:meth:`NavierStokesWind._move_bodies`).
+``wind.precision=float32`` stores the velocity, its scratch and the pressure solve's
 vectors in single precision (half the bytes each kernel moves); the pressure, the
 arithmetic, every sum and the viscous solve's iterate stay double, and the pressure
 tolerance is at least TOLERANCE_FLOOR.

@@ -47,8 +47,11 @@ from numba.extending import intrinsic
 
 from windbench.geometry.bodies import (
     MESH,
+    POSE,
+    PREVIOUS,
     BodyTable,
     body_distance,
+    is_moving,
     set_poses,
     table_distance,
     to_rest,
@@ -300,7 +303,7 @@ def first_body_hit(table, b, a, e, scratch, normal):
     A moving body is met at its current pose: the piece carried to its rest frame,
     a0 = R^T (a - T), e0 = R^T e (s is the same on both), the normal turned back, R n0.
     """
-    if table.moving[b]:
+    if is_moving(table, b):
         return _posed_first_hit(table, b, a, e, scratch, normal)
     return _rest_first_hit(table, b, a, e, scratch, normal)
 
@@ -316,7 +319,7 @@ def _rest_first_hit(table, b, a, e, scratch, normal):
 @njit(cache=True)
 def _posed_first_hit(table, b, a, e, scratch, normal):
     """:func:`first_body_hit` on moving body b at its current pose."""
-    pose = table.poses[b]
+    pose = table.params[b, POSE:PREVIOUS]
     a0 = to_rest(pose, a[0], a[1], a[2])
     ex, ey, ez = e[0], e[1], e[2]
     e0 = (
@@ -340,7 +343,7 @@ def push_out_particles(table, positions, n, delta):
     normal = np.empty(3)
     for q in range(n):
         for b in range(table.kinds.shape[0]):
-            if not table.moving[b]:
+            if not is_moving(table, b):
                 continue
             px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
             d = table_distance(table, b, px, py, pz, normal)
