@@ -287,3 +287,22 @@ def test_contact_clearance_skips_no_contact():
     near = np.abs(dq) < 0.02  # well inside the lattice (spacing 1 cm, padded by 3)
     assert np.all(dp[near] >= dq[near] - LIPSCHITZ * step[near])
     assert np.any(np.abs(dp - dq) > 0.5 * step)  # the pairs do probe the slope
+
+
+@pytest.mark.parametrize("friction", [0.3, 0.0])
+def test_a_body_turning_under_a_draped_cloth_carries_it_by_friction(friction):
+    """A cylinder turning about its vertical axis at 1 rad/s under a cloth lying on its top:
+    with friction the cloth turns with it (mean angular velocity L_z / I_z -> 1 rad/s),
+    without it the contact normals are vertical and radial and nothing turns the cloth."""
+    spin = {"type": "rotation", "axis": [0, 0, 1], "point": [0, 0, 0], "angular_speed": 1.0}
+    body = {"type": "cylinder", "a": [0, 0, -1], "b": [0, 0, 0.2], "radius": 0.4}
+    turning = body_from_config({**body, "motion": {**spin, "start": 0.25}}, "b")
+    model = _cloth(n=14, size=0.6, origin=(-0.3, -0.3, 0.3))
+    solver = XPBDCloth(model, (turning,), ClothConfig(friction=friction))
+    state, _ = _run(solver, model, 60, air=True)
+    x, v, m = state.positions, state.velocities, solver.tables.constraints.mass
+    omega = np.sum(m * (x[:, 0] * v[:, 1] - x[:, 1] * v[:, 0])) / np.sum(
+        m * (x[:, 0] ** 2 + x[:, 1] ** 2)
+    )
+    assert omega == pytest.approx(1.0 if friction else 0.0, abs=0.02)
+    assert solver.stats(state)["max_penetration"] == 0.0

@@ -10,8 +10,13 @@ all bodies, so the result is the same, for a fraction of the cost. Coulomb frict
 the tangential displacement of a contact in the same substep: it is cancelled if shorter
 than ``mu x penetration depth`` (static), else shortened by that amount (kinetic).
 
-Bodies are rigid and do not move (the paper's walls and character, §4.1.2), so a vertex
-pushed out of a body never gains energy from it beyond the small correction of the depth.
+The paper's walls and character are still (§4.1.2). A kinematic body
+(:mod:`windbench.geometry.motion`) is met at its pose at the end of each substep
+(:func:`follow_track`) and drags what it touches: the tangential displacement that friction
+limits is the vertex's relative to the body's surface point under it over the substep,
+``(p - x_prev) - (p - X_prev(p))`` with X_prev the point's place at the previous pose, so a
+sticking contact moves with the body. A moving body's broad-phase box is all space and its
+clearances are reset every substep (it may approach any vertex).
 """
 
 from __future__ import annotations
@@ -19,7 +24,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from windbench.geometry.bodies import Body, union_distance_point
+from windbench.geometry.bodies import (
+    POSE,
+    PREVIOUS,
+    Body,
+    is_moving,
+    moving_body_at,
+    surface_displacement,
+    union_distance_point,
+)
+from windbench.geometry.motion import POSE_WIDTH
 
 
 def body_boxes(bodies: tuple[Body, ...], margin: float) -> np.ndarray:
@@ -30,9 +44,22 @@ def body_boxes(bodies: tuple[Body, ...], margin: float) -> np.ndarray:
     """
     boxes = np.empty((len(bodies), 6))
     for b, body in enumerate(bodies):
-        lo, hi = body.bounds()
+        lo, hi = body.bounds() if body.motion is None else (-np.inf, np.inf)  # moving: anywhere
         boxes[b, :3], boxes[b, 3:] = lo - margin, hi + margin
     return boxes
+
+
+@njit(cache=True)
+def follow_track(bodies, k, clearance):
+    """Pose the moving bodies for substep k: the previous pose ``track[k]``, the current
+    ``track[k + 1]`` (the table's ``track``, (substeps + 1, m, POSE_WIDTH)); every clearance
+    is reset (a body may have come closer)."""
+    for b in range(bodies.kinds.shape[0]):
+        if is_moving(bodies, b):
+            for j in range(POSE_WIDTH):
+                bodies.params[b, PREVIOUS + j] = bodies.track[k, b, j]
+                bodies.params[b, POSE + j] = bodies.track[k + 1, b, j]
+    clearance[:] = 0.0
 
 
 @njit(cache=True, inline="always")
@@ -58,15 +85,19 @@ def project_vertex(bodies, margin, friction, x_prev, p, normal):
     d = union_distance_point(bodies, p[0], p[1], p[2], normal) - margin
     if d >= 0.0:
         return d
+    b = moving_body_at(bodies, p[0], p[1], p[2], d + margin)
     for k in range(3):
         p[k] -= d * normal[k]
-    # tangential displacement over the substep
-    dn = 0.0
-    for k in range(3):
-        dn += (p[k] - x_prev[k]) * normal[k]
-    tx = p[0] - x_prev[0] - dn * normal[0]
-    ty = p[1] - x_prev[1] - dn * normal[1]
-    tz = p[2] - x_prev[2] - dn * normal[2]
+    # tangential displacement over the substep, relative to a moving body's surface
+    ox, oy, oz = x_prev[0], x_prev[1], x_prev[2]
+    if b >= 0:
+        carried = np.empty(3)
+        surface_displacement(bodies, b, p[0], p[1], p[2], carried)
+        ox, oy, oz = ox + carried[0], oy + carried[1], oz + carried[2]
+    dn = (p[0] - ox) * normal[0] + (p[1] - oy) * normal[1] + (p[2] - oz) * normal[2]
+    tx = p[0] - ox - dn * normal[0]
+    ty = p[1] - oy - dn * normal[1]
+    tz = p[2] - oz - dn * normal[2]
     tl = np.sqrt(tx * tx + ty * ty + tz * tz)
     limit = -friction * d
     if tl <= limit:  # static friction: the contact sticks

@@ -49,7 +49,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from windbench.cloth.collision import body_boxes, contact_vertex, max_penetration
+from windbench.cloth.collision import body_boxes, contact_vertex, follow_track, max_penetration
 from windbench.cloth.constraints import (
     LIMIT_SLACK,
     damp_velocities,
@@ -64,7 +64,7 @@ from windbench.cloth.constraints import (
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
-from windbench.geometry.bodies import BodyTable, body_table
+from windbench.geometry.bodies import MOVING, BodyTable, body_table, set_track
 
 BEND_EVERY = 2  # soft hinges are projected every BEND_EVERY-th substep ...
 BEND_RESOLVED = 0.04  # ... when (omega BEND_EVERY h)^2 <= this for every hinge
@@ -259,7 +259,10 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     vv[:] = v
     normal = np.empty(3)
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
+    moving = np.any(model.contacts.bodies.params[:, MOVING] != 0.0)
     for sub in range(s.substeps):
+        if moving:  # the bodies' poses at the substep's end (collision.follow_track)
+            follow_track(model.contacts.bodies, sub, clear[1])
         _predict(c, f_ext, h, xp, p, vv)  # 1.
         lam[:] = 0.0  # XPBD multipliers of the substep
         _distance_passes(c, frame, s.edge_iterations, p, lam, chain_work)  # 2a.
@@ -555,10 +558,14 @@ class XPBDCloth:
         self.stiffness = k = stiffness(model, self.topology, self.materials)  # mesh order
         self.stretch_edges = ~self.topology.edge_shear
         s = self.settings
+        self.bodies = tuple(bodies)
         self.tables = XPBDModel(
             constraint_tables(model, self.topology, k, s),
             Contacts(
-                body_table(tuple(bodies)), body_boxes(tuple(bodies), s.margin), s.margin, s.friction
+                body_table(self.bodies, track=s.substeps + 1),
+                body_boxes(self.bodies, s.margin),
+                s.margin,
+                s.friction,
             ),
             Settings(s.substeps, s.edge_iterations, s.strain_limit, s.limit_passes),
         )
@@ -586,11 +593,17 @@ class XPBDCloth:
         return self.workspace.frame
 
     def step(self, state: ClothState, external_forces, dt: float) -> ClothState:
-        """Advance all cloths by one frame ``dt`` under gravity and ``external_forces`` (N)."""
+        """Advance all cloths by one frame ``dt`` under gravity and ``external_forces`` (N);
+        moving bodies follow their motion from ``state.frames dt`` (frames of equal dt)."""
         x = np.ascontiguousarray(state.positions, dtype=np.float64)
         v = np.ascontiguousarray(state.velocities, dtype=np.float64)
         f = np.ascontiguousarray(external_forces, dtype=np.float64).reshape(x.shape)
         frame = self.frame_constants(float(dt))
+        if any(b.motion is not None for b in self.bodies):  # poses over the frame
+            t0, subs = state.frames * dt, self.settings.substeps
+            set_track(
+                self.tables.contacts.bodies, self.bodies, t0 + dt * np.arange(subs + 1) / subs
+            )
         out = (np.empty_like(x), np.empty_like(v))
         w = self.workspace
         work, energy, finite = xpbd_frame(

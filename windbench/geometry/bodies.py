@@ -21,15 +21,19 @@ A mesh body's distance is tabulated once, on a lattice of ``spacing`` metres (de
 MESH_SPACING), and sampled trilinearly (:mod:`windbench.geometry.sdf`); its row holds the
 lattice's place in the table's ``fields`` and the mesh's bounding box.
 
-Every body may set ``name`` and ``resolve`` (default true). ``resolve: false`` marks a
-body thinner than any sensible wind cell (a flag pole): cloth collides with it, but the
-run does not demand that the wind grid hold a cell inside it.
+Every body may set ``name``, ``resolve`` (default true) and ``motion``. ``resolve: false``
+marks a body thinner than any sensible wind cell (a flag pole): cloth collides with it, but
+the run does not demand that the wind grid hold a cell inside it. ``motion`` makes the body
+kinematic (:mod:`windbench.geometry.motion`): its config places it at rest and the table's
+poses carry it: row b of the table's ``params`` holds after its 7 parameters a moving flag
+and the current and the previous pose (:func:`set_poses`); a still body (flag 0) is read
+at its rest place as before.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -37,6 +41,7 @@ import numpy as np
 from numba import njit
 
 from windbench.errors import ConfigError
+from windbench.geometry.motion import POSE_WIDTH, Motion, motion_from_config
 from windbench.geometry.sdf import SDFLattice, lattice_distance, sdf_lattice
 from windbench.geometry.triangle_mesh import (
     Placement,
@@ -49,6 +54,10 @@ from windbench.geometry.triangle_mesh import (
 BOX, CAPSULE, CYLINDER, PLANE, MESH = 0, 1, 2, 3, 4
 KINDS = {"box": BOX, "capsule": CAPSULE, "cylinder": CYLINDER, "plane": PLANE, "mesh": MESH}
 N_PARAMS = 7
+MOVING = N_PARAMS  # params column: 1 for a moving body, 0 for a still one
+POSE = MOVING + 1  # params columns of the current pose row ...
+PREVIOUS = POSE + POSE_WIDTH  # ... and of the previous one
+ROW = PREVIOUS + POSE_WIDTH
 MESH_SPACING = 0.01  # m: the SDF lattice of a mesh body; error ~ h^2 / (4 r) on radius r
 _KEYS = {
     "box": ("min", "max"),
@@ -60,12 +69,17 @@ _KEYS = {
 
 
 class BodyTable(NamedTuple):
-    """The bodies as the kernels read them: ``kinds`` (m,), ``params`` (m, 7) and
-    ``fields``, the mesh bodies' distance lattices one after another (:meth:`SDFLattice.entry`)."""
+    """The bodies as the kernels read them: ``kinds`` (m,), ``params`` (m, 7),
+    ``fields``, the mesh bodies' distance lattices one after another (:meth:`SDFLattice.entry`),
+    and ``track`` (k, m, POSE_WIDTH), the poses at the cloth's coming substeps
+    (:func:`set_track`). A row of ``params`` (ROW wide) holds the body's N_PARAMS
+    parameters, at MOVING 1 for a moving body, and the state of one: its current pose row
+    at POSE, the previous one at PREVIOUS (:func:`set_poses`)."""
 
     kinds: np.ndarray
     params: np.ndarray
     fields: np.ndarray
+    track: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -77,6 +91,7 @@ class Body:
     name: str = ""
     resolve: bool = True  # False: thinner than the wind grid (a pole); cloth still collides
     lattice: SDFLattice | None = field(default=None, compare=False, repr=False)  # mesh only
+    motion: Motion | None = None  # None: the body stays where the config places it
 
     @property
     def kind_id(self) -> int:
@@ -103,14 +118,22 @@ def body_from_config(spec: Mapping, key: str) -> Body:
     kind = spec.get("type")
     if kind not in KINDS:
         raise ConfigError(f"{key}.type", f"must be one of {sorted(KINDS)}, got {kind!r}")
-    allowed = set(_KEYS[kind]) | {"type", "name", "resolve"}
+    allowed = set(_KEYS[kind]) | {"type", "name", "resolve", "motion"}
     unknown = set(spec) - allowed
     if unknown:
         raise ConfigError(
             key, f"unknown key(s) {sorted(unknown)} for a {kind}; allowed {sorted(allowed)}"
         )
-    if kind == "mesh":
-        return mesh_body(spec, key)
+    body = mesh_body(spec, key) if kind == "mesh" else _analytic_body(kind, spec, key)
+    if spec.get("motion") is None:
+        return body
+    lo, hi = body.bounds()
+    centre = 0.5 * (lo + hi) if np.all(np.isfinite(lo) & np.isfinite(hi)) else None
+    return replace(body, motion=motion_from_config(spec["motion"], f"{key}.motion", centre))
+
+
+def _analytic_body(kind: str, spec: Mapping, key: str) -> Body:
+    """A box, capsule, cylinder or plane from its checked keys (module docstring)."""
     row = np.zeros(N_PARAMS)
     for n, name in enumerate(k for k in _KEYS[kind] if k != "radius"):
         if name not in spec:
@@ -168,10 +191,13 @@ def _tabulated(path: str, mtime: int, size: int, placement: Placement, spacing: 
     return vertices, triangles, sdf_lattice(vertices, triangles, spacing)
 
 
-def body_table(bodies: Sequence[Body]) -> BodyTable:
-    """The :class:`BodyTable` of ``bodies`` for the numba kernels."""
+def body_table(bodies: Sequence[Body], time: float = 0.0, track: int = 1) -> BodyTable:
+    """The :class:`BodyTable` of ``bodies`` for the numba kernels, posed at ``time`` (s),
+    with room for ``track`` poses per body (:func:`set_track`)."""
     kinds = np.array([b.kind_id for b in bodies], dtype=np.int64)
-    params = np.array([b.params for b in bodies], dtype=np.float64).reshape(len(bodies), N_PARAMS)
+    params = np.zeros((len(bodies), ROW))
+    params[:, :N_PARAMS] = np.array([b.params for b in bodies]).reshape(len(bodies), N_PARAMS)
+    params[:, MOVING] = [b.motion is not None for b in bodies]
     entries, offset = [], 0
     for b, body in enumerate(bodies):
         if body.lattice is not None:
@@ -179,23 +205,60 @@ def body_table(bodies: Sequence[Body]) -> BodyTable:
             entries.append(body.lattice.entry())
             offset += entries[-1].size
     fields = np.concatenate(entries) if entries else np.zeros(0)
-    return BodyTable(kinds, params, fields)
+    table = BodyTable(kinds, params, fields, np.zeros((track, len(bodies), POSE_WIDTH)))
+    set_poses(table, bodies, time)
+    set_poses(table, bodies, time)  # previous = current: no motion yet
+    return table
 
 
-def distances(bodies: Sequence[Body], points) -> tuple[np.ndarray, np.ndarray]:
-    """Signed distance to the union of ``bodies`` and the outward normal there."""
+def set_poses(table: BodyTable, bodies: Sequence[Body], time: float) -> None:
+    """Pose the moving bodies of ``table`` at ``time`` (s), in place: each current pose row
+    becomes the previous one (a still body keeps its zero rows)."""
+    for b, body in enumerate(bodies):
+        if body.motion is not None:
+            table.params[b, PREVIOUS:ROW] = table.params[b, POSE:PREVIOUS]
+            table.params[b, POSE:PREVIOUS] = body.motion.pose(time).row()
+
+
+def set_track(table: BodyTable, bodies: Sequence[Body], times) -> None:
+    """``track[k]`` = the moving bodies' pose rows at ``times[k]`` (s), in place."""
+    for b, body in enumerate(bodies):
+        if body.motion is not None:
+            for k, t in enumerate(times):
+                table.track[k, b] = body.motion.pose(float(t)).row()
+
+
+def distances(bodies: Sequence[Body], points, time: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance to the union of ``bodies`` (posed at ``time``, s) and the outward
+    normal there."""
     pts = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=np.float64)))
     dist = np.empty(pts.shape[0])
     normal = np.empty_like(pts)
-    union_distance(body_table(bodies), pts, dist, normal)
+    union_distance(body_table(bodies, time), pts, dist, normal)
     return dist, normal
 
 
-def inside(bodies: Sequence[Body], points) -> np.ndarray:
-    """Boolean mask: points strictly inside any body."""
+def body_velocity(bodies: Sequence[Body], points, time: float) -> np.ndarray:
+    """(n, 3) velocity at ``time`` (s) of the body nearest each point (the one it lies in):
+    c' + omega x (x - c) of a moving body (:meth:`~windbench.geometry.motion.Pose.point_velocity`),
+    0 of a still one."""
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    velocity = np.zeros(pts.shape)
+    if not bodies or not pts.size:
+        return velocity
+    nearest = np.argmin([distances([b], pts, time)[0] for b in bodies], axis=0)
+    for b, body in enumerate(bodies):
+        here = nearest == b
+        if body.motion is not None and here.any():
+            velocity[here] = body.motion.pose(time).point_velocity(pts[here])
+    return velocity
+
+
+def inside(bodies: Sequence[Body], points, time: float = 0.0) -> np.ndarray:
+    """Boolean mask: points strictly inside any body (posed at ``time``, s)."""
     if not bodies:
         return np.zeros(np.atleast_2d(points).shape[0], dtype=bool)
-    return distances(bodies, points)[0] < 0.0
+    return distances(bodies, points, time)[0] < 0.0
 
 
 @njit(cache=True, inline="always")
@@ -283,13 +346,67 @@ def body_distance(kind, prm, px, py, pz, normal):
 
 
 @njit(cache=True)
-def table_distance(table, b, px, py, pz, normal):
-    """Signed distance from p to body b of a :class:`BodyTable`, outward normal in ``normal``:
-    the mesh bodies' lattices (:func:`~windbench.geometry.sdf.lattice_distance`), else
-    :func:`body_distance`."""
+def rest_distance(table, b, px, py, pz, normal):
+    """Signed distance from p to body b of a :class:`BodyTable` where its config places it,
+    outward normal in ``normal``: the mesh bodies' lattices
+    (:func:`~windbench.geometry.sdf.lattice_distance`), else :func:`body_distance`."""
     if table.kinds[b] == MESH:
         return lattice_distance(table.fields, table.params[b], px, py, pz, normal)
     return body_distance(table.kinds[b], table.params[b], px, py, pz, normal)
+
+
+@njit(cache=True, inline="always")
+def is_moving(table, b):
+    """Whether body b of a :class:`BodyTable` moves (its params' MOVING column)."""
+    return table.params[b, MOVING] != 0.0
+
+
+@njit(cache=True, inline="always")
+def to_rest(pose, px, py, pz):
+    """x0 = R^T (x - T) of a pose row (R row-major, T): a world point in the rest frame."""
+    dx, dy, dz = px - pose[9], py - pose[10], pz - pose[11]
+    return (
+        pose[0] * dx + pose[3] * dy + pose[6] * dz,
+        pose[1] * dx + pose[4] * dy + pose[7] * dz,
+        pose[2] * dx + pose[5] * dy + pose[8] * dz,
+    )
+
+
+@njit(cache=True)
+def table_distance(table, b, px, py, pz, normal):
+    """Signed distance from p to body b of a :class:`BodyTable`, outward normal in ``normal``:
+    a still body's :func:`rest_distance`; a moving one's :func:`posed_distance`."""
+    if is_moving(table, b):
+        return posed_distance(table, b, px, py, pz, normal)
+    if table.kinds[b] == MESH:  # rest_distance written out: the still path stays inlinable
+        return lattice_distance(table.fields, table.params[b], px, py, pz, normal)
+    return body_distance(table.kinds[b], table.params[b], px, py, pz, normal)
+
+
+@njit(cache=True)
+def posed_distance(table, b, px, py, pz, normal):
+    """:func:`rest_distance` of moving body b at its current pose: d0(R^T (x - T)), the
+    normal turned forward, R n0 (a call of its own, so that the still bodies' path stays
+    small enough to inline)."""
+    pose = table.params[b, POSE:PREVIOUS]
+    qx, qy, qz = to_rest(pose, px, py, pz)
+    d = rest_distance(table, b, qx, qy, qz, normal)
+    nx, ny, nz = normal[0], normal[1], normal[2]
+    normal[0] = pose[0] * nx + pose[1] * ny + pose[2] * nz
+    normal[1] = pose[3] * nx + pose[4] * ny + pose[5] * nz
+    normal[2] = pose[6] * nx + pose[7] * ny + pose[8] * nz
+    return d
+
+
+@njit(cache=True)
+def surface_displacement(table, b, px, py, pz, out):
+    """out = how far the point of moving body b now at p moved with the body since the
+    previous pose: p - (R_prev R^T (p - T) + T_prev)."""
+    qx, qy, qz = to_rest(table.params[b, POSE:PREVIOUS], px, py, pz)
+    prev = table.params[b, PREVIOUS:ROW]
+    out[0] = px - (prev[0] * qx + prev[1] * qy + prev[2] * qz + prev[9])
+    out[1] = py - (prev[3] * qx + prev[4] * qy + prev[5] * qz + prev[10])
+    out[2] = pz - (prev[6] * qx + prev[7] * qy + prev[8] * qz + prev[11])
 
 
 @njit(cache=True)
@@ -306,6 +423,17 @@ def union_distance_point(table, px, py, pz, normal):
             best = d
             normal[0], normal[1], normal[2] = tmp[0], tmp[1], tmp[2]
     return best
+
+
+@njit(cache=True)
+def moving_body_at(table, px, py, pz, distance):
+    """The moving body of a :class:`BodyTable` whose signed distance at p is ``distance``
+    (the union's, :func:`union_distance_point`: p's nearest body), or -1 if it is still."""
+    tmp = np.empty(3)
+    for b in range(table.kinds.shape[0]):
+        if is_moving(table, b) and table_distance(table, b, px, py, pz, tmp) == distance:
+            return b
+    return -1
 
 
 @njit(cache=True)

@@ -71,6 +71,13 @@ class WindField(ABC):
         self.grid = grid
         self.params = params
         self._solid = inside(scene.bodies, grid.cell_centres().reshape(-1, 3)).reshape(grid.shape)
+        self.moving = any(b.motion is not None for b in scene.bodies)
+
+    def pose_solid(self, time: float) -> None:
+        """The cells whose centre lies inside a body posed at ``time`` (s): for a scene whose
+        bodies move (:mod:`windbench.geometry.motion`); :meth:`solid_mask` follows."""
+        centres = self.grid.cell_centres().reshape(-1, 3)
+        self._solid = inside(self.scene.bodies, centres, time).reshape(self.grid.shape)
 
     @abstractmethod
     def step(self, dt: float, obstacles: Obstacles) -> None:

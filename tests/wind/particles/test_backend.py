@@ -304,3 +304,53 @@ def test_a_run_with_bad_settings_stops_before_any_output(run_config, override, k
         run_config(["scene=fence", "wind=particles", override])
     assert err.value.key == key
     assert not any(tmp_path.rglob("*.nc"))
+
+
+def _deep_cells(bodies, grid, time):
+    """Cells whose eight corners all lie inside the (convex) bodies posed at ``time``."""
+    lo = np.asarray(grid.lower)
+    idx = np.indices(grid.shape).reshape(3, -1).T
+    corners = [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    d = np.stack([distances(bodies, lo + grid.h * (idx + c), time)[0] for c in corners], axis=1)
+    return (d < 0).all(axis=1).reshape(grid.shape)
+
+
+def test_particles_meet_a_placed_body_where_its_pose_puts_it():
+    """A box moved 1.2 m downwind and turned 30 degrees (a held keyframe pose): no particle
+    enters the posed box and the cells inside it stay unreached, while the flow fills the
+    cells of its rest place."""
+    place = {"type": "keyframes", "times": [0.0], "positions": [[1.2, 0, 0]], "rotations": [30.0]}
+    box = {"type": "box", "min": [0.5, 0.55, 0.45], "max": [1.35, 1.4, 1.35], "motion": place}
+    scene = scene_of([{"type": "uniform", "velocity": [5.0, 0.3, 0.0]}], [box])
+    grid = Grid.from_domain(scene.lower, scene.upper, 32)
+    wind = ParticleWind(scene, grid, params())
+
+    def outside(w):
+        assert (distances(scene.bodies, w.particles[0], 1.0)[0] >= 0.0).all()
+
+    advance(wind, 1.0, each=outside)
+    posed = _deep_cells(scene.bodies, grid, 1.0)
+    rest = _deep_cells([scene_of([], [{**box, "motion": None}]).bodies[0]], grid, 0.0)
+    assert posed.sum() >= 8 and (rest & ~posed).sum() >= 8
+    assert not wind.ever_reached()[posed].any()
+    assert wind.ever_reached()[rest & ~posed].all()
+
+
+def test_a_turning_body_moves_its_solid_cells_and_its_lee():
+    """A box turning about a vertical axis: the solid cells follow its current pose, u = 0
+    deep inside it, and the particles it sweeps over are pushed out, not left inside."""
+    spin = {"type": "rotation", "axis": [0, 0, 1], "point": [2, 1, 1], "angular_speed": 1.5}
+    box = {"type": "box", "min": [1.2, 0.8, 0.4], "max": [2.8, 1.2, 1.6], "motion": spin}
+    scene = scene_of([{"type": "uniform", "velocity": [5.0, 0.0, 0.0]}], [box])
+    grid = Grid.from_domain(scene.lower, scene.upper, 32)
+    wind = advance(ParticleWind(scene, grid, params()), 0.5)
+    t = wind.time
+    assert t == pytest.approx(0.5)
+    deep = _deep_cells(scene.bodies, grid, t)
+    np.testing.assert_array_equal(
+        wind.solid_mask(),
+        distances(scene.bodies, grid.cell_centres().reshape(-1, 3), t)[0].reshape(grid.shape) < 0,
+    )
+    assert deep.sum() >= 8 and not _deep_cells(scene.bodies, grid, 0.0)[deep].all()
+    assert_all(wind.velocity()[deep], [0.0, 0.0, 0.0])
+    assert (distances(scene.bodies, wind.particles[0], t)[0] >= 0.0).all()  # none swept in

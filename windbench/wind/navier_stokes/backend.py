@@ -29,7 +29,8 @@ source only where it blows in, with its inflow ``turbulence`` if it has one and 
 a net volume flux turns its inflow faces into openings (pressure zero). The initial
 field is the superposed sources, zero at bodies, projected. Cells whose centre lies in a
 rigid body are solid: every face touching one has zero velocity (the paper's interior
-check). ``wind.precision=float32`` stores the velocity, its scratch and the pressure solve's
+check), or a moving body's velocity there (:meth:`NavierStokesWind._move_bodies`).
+``wind.precision=float32`` stores the velocity, its scratch and the pressure solve's
 vectors in single precision (half the bytes each kernel moves); the pressure, the
 arithmetic, every sum and the viscous solve's iterate stay double, and the pressure
 tolerance is at least TOLERANCE_FLOOR.
@@ -48,6 +49,7 @@ import numba
 import numpy as np
 
 from windbench.errors import ConfigError
+from windbench.geometry.bodies import body_velocity
 from windbench.geometry.raster import triangle_cells
 from windbench.wind import surface_layer
 from windbench.wind.base import Obstacles, WindField
@@ -239,6 +241,7 @@ class NavierStokesWind(WindField):
             boundaries.free_faces(a, self.kinds, self.solid, self.free_static[a])
         self.free = [f.copy() for f in self.free_static]
         self.solid_faces = [self._faces_touching_solid(a) for a in range(3)]
+        self.solid_values = [0.0, 0.0, 0.0]  # still bodies; moving ones: _move_bodies
         dirichlet = any(k in (OUTFLOW, OPENING) for k in self.kinds)
         self.poisson = MultigridPoisson(
             shape, self.periodic, singular=not dirichlet, dtype=self.dtype
@@ -257,6 +260,8 @@ class NavierStokesWind(WindField):
         self._blocked = None  # (rows, velocities, weights) of the faces the cloth closes
         self._pockets = (np.full(shape, -1, np.int64), 0)  # air the cloth encloses
         self._loads = None  # pressure force / rho on each cloth triangle
+        if self.moving:
+            self._move_bodies()
         self._initial_condition(scene)
 
     # ------------------------------------------------------------ set-up helpers
@@ -333,8 +338,35 @@ class NavierStokesWind(WindField):
         self._project()
         self._pressure_scale, self._last_dt = 0.0, 0.0  # no earlier time level
 
+    def _move_bodies(self) -> None:
+        """Moving bodies (:mod:`windbench.geometry.motion`) as moving boundaries: the solid
+        cells at the backend's time, re-rasterised (free faces, solid faces, Poisson
+        weights, eddy viscosity) when they change, and on every face touching a solid cell
+        the velocity of the body there, u_face = c' + omega x (x_face - c), which the
+        projection keeps as a prescribed face value. A rigid motion is divergence free, so
+        the prescribed fluxes of a closed domain still balance."""
+        self.pose_solid(self.time)
+        solid = self._solid.astype(np.uint8)
+        if not np.array_equal(solid, self.solid):
+            self.solid[...] = solid
+            for a in range(3):
+                boundaries.free_faces(a, self.kinds, self.solid, self.free_static[a])
+                self.free[a][...] = self.free_static[a]
+            self.solid_faces = [self._faces_touching_solid(a) for a in range(3)]
+            self._set_weights()
+            if self.turbulence == "mixing_length":
+                self.nu_t = self._eddy_viscosity_model(float(self.params.mixing_length_limit))
+        self.solid_values = [
+            body_velocity(
+                self.scene.bodies,
+                self._face_points(a).reshape(-1, 3)[self.solid_faces[a]],
+                self.time,
+            )[:, a].astype(self.dtype)
+            for a in range(3)
+        ]
+
     def _faces_touching_solid(self, a) -> np.ndarray:
-        """Flat indices of the faces of component a next to a body (model: bodies are rigid)."""
+        """Flat indices of the faces of component a next to a body."""
         probe = np.ones(self.q[a].shape)
         boundaries.zero_solid_faces(probe, a, self.solid)
         return np.flatnonzero(probe == 0.0)
@@ -354,7 +386,7 @@ class NavierStokesWind(WindField):
 
     def _apply_boundaries(self, set_normal: bool):
         for a in range(3):
-            self.q[a].reshape(-1)[self.solid_faces[a]] = 0.0
+            self.q[a].reshape(-1)[self.solid_faces[a]] = self.solid_values[a]
             boundaries.fill_boundary(self.q[a], a, self.kinds, self.planes[a], set_normal)
         if self._blocked is not None and len(self._blocked[0]):
             rows, vals, _ = self._blocked
@@ -648,6 +680,8 @@ class NavierStokesWind(WindField):
         self.time += dt
         if self.times.varies:  # the inflow of this step's end
             self.planes = self._boundary_planes()
+        if self.moving:  # the bodies at this step's end
+            self._move_bodies()
         marked = self._couple(obstacles)
         self._forces(dt)
         te = time.perf_counter()

@@ -65,6 +65,7 @@ from windbench.wind.particles.tracing import (
     admit_particles,
     euler_velocities,
     expire_cells,
+    follow_bodies,
     reached_sources,
     register_bodies,
     register_cloth,
@@ -459,6 +460,15 @@ class ParticleWind(WindField):
         return self.state.time
 
     def step(self, dt: float, obstacles: Obstacles) -> None:
+        if self.moving:  # the particles meet the bodies at the step's end
+            t = self.state.time + dt
+            self.pose_solid(t)
+            solid = self.solid_mask().reshape(-1)
+            st = self.state
+            tables = follow_bodies(
+                self.model.tables, self.scene.bodies, t, (st.cells, st.particles, st.n), solid
+            )
+            self.model = replace(self.model, tables=tables)
         self.state, self._stats = advance(self.model, self.state, self.workspace, dt, obstacles)
 
     def add_particles(self, positions, sources):

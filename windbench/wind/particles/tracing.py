@@ -47,9 +47,14 @@ from numba.extending import intrinsic
 
 from windbench.geometry.bodies import (
     MESH,
+    POSE,
+    PREVIOUS,
     BodyTable,
     body_distance,
+    is_moving,
+    set_poses,
     table_distance,
+    to_rest,
     union_distance_point,
 )
 from windbench.geometry.raster import segment_triangle
@@ -293,10 +298,77 @@ def convex_first_hit(kind, prm, a, e, scratch, normal):
 
 @njit(cache=True, inline="always")
 def first_body_hit(table, b, a, e, scratch, normal):
-    """First s in [0, 1] where a + s e meets body b of the table, or -1; normal there."""
+    """First s in [0, 1] where a + s e meets body b of the table, or -1; normal there.
+
+    A moving body is met at its current pose: the piece carried to its rest frame,
+    a0 = R^T (a - T), e0 = R^T e (s is the same on both), the normal turned back, R n0.
+    """
+    if is_moving(table, b):
+        return _posed_first_hit(table, b, a, e, scratch, normal)
+    return _rest_first_hit(table, b, a, e, scratch, normal)
+
+
+@njit(cache=True, inline="always")
+def _rest_first_hit(table, b, a, e, scratch, normal):
+    """:func:`first_body_hit` on body b where its config places it."""
     if table.kinds[b] == MESH:
         return lattice_first_hit(table.fields, table.params[b], a, e, normal)
     return convex_first_hit(table.kinds[b], table.params[b], a, e, scratch, normal)
+
+
+@njit(cache=True)
+def _posed_first_hit(table, b, a, e, scratch, normal):
+    """:func:`first_body_hit` on moving body b at its current pose."""
+    pose = table.params[b, POSE:PREVIOUS]
+    a0 = to_rest(pose, a[0], a[1], a[2])
+    ex, ey, ez = e[0], e[1], e[2]
+    e0 = (
+        pose[0] * ex + pose[3] * ey + pose[6] * ez,
+        pose[1] * ex + pose[4] * ey + pose[7] * ez,
+        pose[2] * ex + pose[5] * ey + pose[8] * ez,
+    )
+    s = _rest_first_hit(table, b, a0, e0, scratch, normal)
+    nx, ny, nz = normal[0], normal[1], normal[2]
+    normal[0] = pose[0] * nx + pose[1] * ny + pose[2] * nz
+    normal[1] = pose[3] * nx + pose[4] * ny + pose[5] * nz
+    normal[2] = pose[6] * nx + pose[7] * ny + pose[8] * nz
+    return s
+
+
+@njit(cache=True)
+def push_out_particles(table, positions, n, delta):
+    """Particles 0..n-1 that a moving body of the table has swept over are moved out along
+    its normal to ``delta`` outside its surface: p += (delta - d) n (the body carries them,
+    as a hit stops a particle there)."""
+    normal = np.empty(3)
+    for q in range(n):
+        for b in range(table.kinds.shape[0]):
+            if not is_moving(table, b):
+                continue
+            px, py, pz = positions[q, 0], positions[q, 1], positions[q, 2]
+            d = table_distance(table, b, px, py, pz, normal)
+            if d < 0.0:
+                for k in range(3):
+                    positions[q, k] += (delta - d) * normal[k]
+
+
+def follow_bodies(model: GustModel, bodies, time: float, state, solid) -> GustModel:
+    """Pose the moving ``bodies`` at ``time`` (s) and register them again
+    (:func:`register_bodies`); the cells' SOLID and BODIES flags follow, a cell the bodies
+    now cover (``solid``, (n_cells,) bool) holds no wind and the particles they swept over
+    are pushed out (:func:`push_out_particles`). ``state`` = (cells, particles, n). Returns
+    the model with the new registration (the table's poses change in place)."""
+    cells, particles, n = state
+    table = model.bodies.table
+    set_poses(table, bodies, time)
+    push_out_particles(table, particles.positions, n, model.rules.delta)
+    start, items = register_bodies(table, model.grid)
+    cells.flags[:] &= np.uint8(~(SOLID | BODIES) & 0xFF)
+    cells.flags[solid] |= SOLID
+    cells.flags[np.diff(start) > 0] |= BODIES
+    cells.u[solid] = 0.0
+    cells.values[solid] = 0.0
+    return model._replace(bodies=BodyCells(table, start, items))
 
 
 @njit(cache=True, inline="always")
