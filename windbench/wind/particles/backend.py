@@ -128,6 +128,12 @@ class ParticleConfig(WindConfig):
     mixing_length_limit: float = setting(
         MIXING_LENGTH_LIMIT, "m", "mixing lee: Blackadar's lambda of the eddy diffusivity", gt=0
     )
+    recirculation_backflow: float = setting(
+        0.3, "1", "mixing lee: eddy's ground backflow over the wind at an obstacle's top", ge=0
+    )
+    wake_mixing: float = setting(
+        0.05, "1", "mixing lee: wake eddy diffusivity over (wind at the top x height)", ge=0
+    )
     seed: int = setting(0, "1", "random seed (conf/wind/particles.yaml sets ${seed})", ge=0)
 
 
@@ -371,7 +377,7 @@ def settle(model, state, work, n_touched: int, dt: float) -> ParticleState:
     lee = model.mixing
     scale = lee.inverse_density / (model.tables.grid.h**3 * dt)
     factor = -np.expm1(-dt / lee.averaging_time)
-    mixing.blend_cells(state.deposits, scale, factor, state.cells.flags, state.cells.u)
+    mixing.blend_cells(state.deposits, scale, factor, state.cells.flags, lee.eddy, state.cells.u)
     return state
 
 
