@@ -52,7 +52,7 @@ from windbench.wind.particles.tracing import (
     first_triangle_hit,
 )
 from windbench.wind.particles.wake import (
-    cavity_cells,
+    eddy_field,
     leave_cavity,
     wake_diffusivity,
     wake_rows,
@@ -83,7 +83,6 @@ class MixingModel(NamedTuple):
     seed: int
     wakes: np.ndarray  # (n_wakes, N_WAKE) the obstacles' near wakes (:mod:`.wake`)
     floor: float  # m: the domain's lowest height
-    cavity: np.ndarray  # (n_cells,) bool: the cell's centre lies in a wake's cavity
 
 
 class MixStep(NamedTuple):
@@ -195,10 +194,8 @@ def mixing_lee(scene, grid, params, emitters) -> MixingLee:
         float(params.recirculation_backflow),
         float(params.wake_mixing),
     )
-    eddy, cavity = cavity_cells(wakes, lower, float(grid.h), tuple(int(n) for n in grid.shape))
-    tables = MixingModel(
-        k, z_first, dz, face_actions(scene), int(params.seed), wakes, lower[2], cavity
-    )
+    eddy = eddy_field(wakes, lower, float(grid.h), tuple(int(n) for n in grid.shape))
+    tables = MixingModel(k, z_first, dz, face_actions(scene), int(params.seed), wakes, lower[2])
     density = np.array(
         [free_density(p, e, lower, upper) for p, e in zip(scene.sources, emitters, strict=True)]
     )
@@ -483,7 +480,7 @@ def trace_mixing(model, mix, cloth, cells, deposits, particles, step, work):
                         model.bodies, cloth, flags[cell], cell, p, e, t, t_exit, work
                     )
                 t_end = t + best * (t_exit - t) if best <= 1.0 else t_exit
-                if not flags[cell] & SOLID and not mix.cavity[cell]:
+                if not flags[cell] & SOLID:
                     _deposit(deposits, marked, cell, s, (t_end - t) * remaining, a, step.t_now)
                 crossings += 1
                 if best <= 1.0 or t_exit >= 1.0:

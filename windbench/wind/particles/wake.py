@@ -11,9 +11,9 @@ its length after Fackrell (1984, J. Wind Eng. Ind. Aerodyn. 16, 97),
     L_R / H = 1.8 (W / H) / ((L / H)^0.3 (1 + 0.24 W / H))   (2-D limit: 7.5 (L/H)^-0.3),
 
 W taken twice across a wall or periodic face it touches, unbounded if it touches both.
-The outer flow goes around the cavity as around a body (the particles are mirrored out of
-it and leave no wind in its cells, so their flux passes over it) and its cells carry the
-closed eddy of the stream function (xi = s / L_R, h(xi) = H sqrt(1 - xi^2), U_H the
+The outer flow goes around the cavity as around a body (the particles are mirrored up out
+of it at the end of each step, so their flux passes over it) and the cells add to their wind
+the closed eddy of the stream function (xi = s / L_R, h(xi) = H sqrt(1 - xi^2), U_H the
 sources' undisturbed speed at the obstacle's top, beta its backflow ratio)
 
     psi = -beta U_H z P(xi) (1 - z^2/h^2)^2,   P = (27/4) xi (1 - xi)^2,
@@ -191,18 +191,17 @@ def in_cavity(wakes, p, lower_z):
 
 @njit(cache=True)
 def leave_cavity(wakes, p, lower_z):
-    """p mirrored out of the cavity it lies in, radially from the lee face's foot in the
-    (s, z) plane (a reflecting edge: as deep outside as it was inside); p if in none."""
+    """p mirrored up out of the cavity it lies in, across its edge at the same s and n:
+    z <- 2 h(xi) - z (a reflecting edge that moves no particle along the wind, so the
+    flux it carries is kept); p if it lies in none."""
     for k in range(wakes.shape[0]):
         row = wakes[k]
         s, z, n = _frame(row, p, lower_z)
         xi, t = _in_cavity(row, s, z, n)
         if xi < 0.0:
             continue
-        r = np.sqrt(xi * xi + t * (1.0 - xi * xi))  # (s/L_R)^2 + (z/H)^2 = r^2
-        grow = 2.0 / max(r, 1e-6) - 1.0
-        ds, dz = (grow - 1.0) * s, (grow - 1.0) * z
-        return (p[0] + ds * row[DX], p[1] + ds * row[DY], p[2] + dz)
+        edge = row[TOP] * np.sqrt(1.0 - xi * xi)
+        return (p[0], p[1], p[2] + 2.0 * (edge - z))
     return p
 
 
@@ -230,18 +229,13 @@ def eddy_wind(wakes, p, lower_z):
 
 
 @njit(cache=True)
-def cavity_cells(wakes, lower, h, shape):
-    """(eddy wind (n_cells, 3), in a cavity (n_cells,) bool) at the cell centres, cells in
-    (i, j, k) C order."""
-    n = shape[0] * shape[1] * shape[2]
-    eddy, inside = np.zeros((n, 3)), np.zeros(n, dtype=np.bool_)
-    if wakes.shape[0] == 0:
-        return eddy, inside
+def eddy_field(wakes, lower, h, shape):
+    """(n_cells, 3) eddy wind at the cell centres, cells in (i, j, k) C order."""
+    out = np.zeros((shape[0] * shape[1] * shape[2], 3))
     for i in range(shape[0]):
         for j in range(shape[1]):
             for k in range(shape[2]):
                 c = (i * shape[1] + j) * shape[2] + k
                 p = (lower[0] + (i + 0.5) * h, lower[1] + (j + 0.5) * h, lower[2] + (k + 0.5) * h)
-                inside[c] = in_cavity(wakes, p, lower[2])
-                eddy[c, 0], eddy[c, 1], eddy[c, 2] = eddy_wind(wakes, p, lower[2])
-    return eddy, inside
+                out[c, 0], out[c, 1], out[c, 2] = eddy_wind(wakes, p, lower[2])
+    return out
