@@ -64,8 +64,17 @@ def behind_flux(rec) -> float:
     undisturbed = superpose(scene.sources, grid.cell_centres().reshape(-1, 3))
     solid = np.linalg.norm(wind, axis=-1).max(axis=0) == 0.0
     ratio = plane_flux_ratio(wind.mean(axis=0), undisturbed.reshape(wind.shape[1:]), solid)
-    rear = max(b.bounds()[1][0] for b in scene.bodies if b.resolve)
-    return float(ratio[grid.axes()[0] > rear].min())
+    rears = [b.bounds()[1][0] for b in scene.bodies if b.resolve]
+    return float(ratio[grid.axes()[0] > max(rears)].min()) if rears else np.nan
+
+
+def run_command(rec, lee_model: str) -> str:
+    """The single-run command that repeats ``rec`` (its experiment and settings)."""
+    s = rec.settings
+    return (
+        f"windbench experiment={rec.experiment} wind=particles wind.lee_model={lee_model} "
+        f"scene={s['scene']} grid.resolution={s['resolution']} sim.dt={s['dt']} seed={s['seed']}"
+    )
 
 
 def reverse_flow_floor(ref) -> float:
@@ -119,6 +128,7 @@ def run_rows(runs, references) -> pd.DataFrame:
             continue
         row = {k: rec.settings[k] for k in SETTINGS}
         row["lee_model"] = rec.config.get("wind.lee_model") or "paper"
+        row["command"] = run_command(rec, row["lee_model"])
         row["lee_error"] = rec.figures.get("lee_error")
         row["flux_behind_min"] = behind_flux(rec)
         row["wind_seconds_median"] = rec.figures.get("wind_seconds_median")

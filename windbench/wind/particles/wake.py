@@ -11,9 +11,9 @@ its length after Fackrell (1984, J. Wind Eng. Ind. Aerodyn. 16, 97),
     L_R / H = 1.8 (W / H) / ((L / H)^0.3 (1 + 0.24 W / H))   (2-D limit: 7.5 (L/H)^-0.3),
 
 W taken twice across a wall or periodic face it touches, unbounded if it touches both.
-The outer flow goes around the cavity as around a body (the particles are mirrored up out
-of it at the end of each step, so their flux passes over it) and the cells add to their wind
-the closed eddy of the stream function (xi = s / L_R, h(xi) = H sqrt(1 - xi^2), U_H the
+The outer flow goes around the cavity as around a body (a particle that ends a step in it
+is mirrored out across its nearest edge, top or side, never along the wind, so its flux
+passes around) and the cells add to their wind the closed eddy of the stream function (xi = s / L_R, h(xi) = H sqrt(1 - xi^2), U_H the
 sources' undisturbed speed at the obstacle's top, beta its backflow ratio)
 
     psi = -beta U_H z P(xi) (1 - z^2/h^2)^2,   P = (27/4) xi (1 - xi)^2,
@@ -123,10 +123,9 @@ def wake_rows(scene, lower, backflow: float, mixing: float):
 @njit(cache=True, inline="always")
 def _frame(row, p, lower_z):
     """(s, z, n) of p in a wake's frame: along the wind from the lee face, up from the
-    floor, across the wind."""
-    rx, ry = p[0] - row[CX], p[1] - row[CY]
-    s = rx * row[DX] + ry * row[DY] - row[HALF_DEPTH]
-    return s, p[2] - lower_z, -rx * row[DY] + ry * row[DX]
+    floor, across the wind (n = p . (-d_y, d_x), as the span's bounds)."""
+    s = (p[0] - row[CX]) * row[DX] + (p[1] - row[CY]) * row[DY] - row[HALF_DEPTH]
+    return s, p[2] - lower_z, -p[0] * row[DY] + p[1] * row[DX]
 
 
 @njit(cache=True, inline="always")
@@ -191,17 +190,21 @@ def in_cavity(wakes, p, lower_z):
 
 @njit(cache=True)
 def leave_cavity(wakes, p, lower_z):
-    """p mirrored up out of the cavity it lies in, across its edge at the same s and n:
-    z <- 2 h(xi) - z (a reflecting edge that moves no particle along the wind, so the
-    flux it carries is kept); p if it lies in none."""
+    """p mirrored out of the cavity it lies in across its nearest edge, the top (z <- 2 h(xi)
+    - z) or a side of the span (n <- 2 n_side - n): a reflecting edge that moves no
+    particle along the wind, so the flux it carries is kept; p if it lies in none."""
     for k in range(wakes.shape[0]):
         row = wakes[k]
         s, z, n = _frame(row, p, lower_z)
         xi, t = _in_cavity(row, s, z, n)
         if xi < 0.0:
             continue
-        edge = row[TOP] * np.sqrt(1.0 - xi * xi)
-        return (p[0], p[1], p[2] + 2.0 * (edge - z))
+        up = row[TOP] * np.sqrt(1.0 - xi * xi) - z
+        side = min(n - row[N_LO], row[N_HI] - n)
+        if up <= side:
+            return (p[0], p[1], p[2] + 2.0 * up)
+        shift = -2.0 * side if n - row[N_LO] < row[N_HI] - n else 2.0 * side
+        return (p[0] - shift * row[DY], p[1] + shift * row[DX], p[2])
     return p
 
 
