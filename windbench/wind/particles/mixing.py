@@ -29,6 +29,8 @@ by, a profile's candidates kept with probability f(z) / f_max so that n_i is uni
 Particles are conserved, so the volume flux through any plane is the inflow's, up to the
 diffusive K dn/dx. Cells keep a running mean u <- u + (1 - e^(-dt/T)) (u_step - u),
 T = ``wind.averaging_time``. Sources must be uniform winds entering through the faces.
+Behind each box on the floor the near wake (:mod:`.wake`) adds a separation cavity the
+particles go around, its recirculating eddy to the cells' wind and its shear layer's K.
 """
 
 from __future__ import annotations
