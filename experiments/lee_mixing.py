@@ -7,9 +7,8 @@ and cost (windbench/wind/particles/mixing.py).
 The first form reads the particle runs under RUNS (e.g. multirun/fence,
 multirun/fence_mixing, multirun/paper, multirun/paper_mixing) and writes one row per run
 to ``lee_mixing.csv``: scene, lee model, resolution, dt, seed, the command that repeats
-it; ``lee_error`` against the
-scene's reference (the report's choice, :mod:`windbench.report.lee`) and its ratio to the
-paper lee's at the same settings, and the floor no lee without reverse flow can go
+it; ``lee_error`` against the scene's reference (the report's choice,
+:mod:`windbench.report.lee`) and its ratio to the paper lee's at the same settings, and the floor no lee without reverse flow can go
 below (:func:`reverse_flow_floor`); the smallest volume-flux ratio through the planes
 behind the scene's bodies (``metrics.plane_flux_ratio`` of the mean of the run's wind
 snapshots); the fence's u/u0 at half its height 2, 5, 10 and 15 H behind it (steady
