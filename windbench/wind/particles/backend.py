@@ -129,10 +129,14 @@ class ParticleConfig(WindConfig):
         MIXING_LENGTH_LIMIT, "m", "mixing lee: Blackadar's lambda of the eddy diffusivity", gt=0
     )
     recirculation_backflow: float = setting(
-        0.3, "1", "mixing lee: eddy's ground backflow over the wind at an obstacle's top", ge=0
+        0.3,
+        "1",
+        "mixing lee: the wake eddy's backflow at the floor over the wind at the box's top",
+        ge=0,
+        le=1,
     )
     wake_mixing: float = setting(
-        0.05, "1", "mixing lee: wake eddy diffusivity over (wind at the top x height)", ge=0
+        0.05, "1", "mixing lee: wake eddy diffusivity over (wind at the box's top x height)", ge=0
     )
     seed: int = setting(0, "1", "random seed (conf/wind/particles.yaml sets ${seed})", ge=0)
 
