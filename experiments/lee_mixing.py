@@ -6,9 +6,9 @@ and cost (windbench/wind/particles/mixing.py).
 
 The first form reads the particle runs under RUNS (e.g. multirun/fence,
 multirun/fence_mixing, multirun/paper, multirun/paper_mixing) and writes one row per run
-to ``lee_mixing.csv``: scene, lee model, resolution, dt, seed; ``lee_error`` against the
-scene's reference (the report's choice, :mod:`windbench.report.lee`) and its ratio to the
-paper lee's at the same settings, and the floor no lee without reverse flow can go
+to ``lee_mixing.csv``: scene, lee model, resolution, dt, seed, the command that repeats
+it; ``lee_error`` against the scene's reference (the report's choice,
+:mod:`windbench.report.lee`) and its ratio to the paper lee's at the same settings, and the floor no lee without reverse flow can go
 below (:func:`reverse_flow_floor`); the smallest volume-flux ratio through the planes
 behind the scene's bodies (``metrics.plane_flux_ratio`` of the mean of the run's wind
 snapshots); the fence's u/u0 at half its height 2, 5, 10 and 15 H behind it (steady
@@ -64,8 +64,17 @@ def behind_flux(rec) -> float:
     undisturbed = superpose(scene.sources, grid.cell_centres().reshape(-1, 3))
     solid = np.linalg.norm(wind, axis=-1).max(axis=0) == 0.0
     ratio = plane_flux_ratio(wind.mean(axis=0), undisturbed.reshape(wind.shape[1:]), solid)
-    rear = max(b.bounds()[1][0] for b in scene.bodies if b.resolve)
-    return float(ratio[grid.axes()[0] > rear].min())
+    rears = [b.bounds()[1][0] for b in scene.bodies if b.resolve]
+    return float(ratio[grid.axes()[0] > max(rears)].min()) if rears else np.nan
+
+
+def run_command(rec, lee_model: str) -> str:
+    """The single-run command that repeats ``rec`` (its experiment and settings)."""
+    s = rec.settings
+    return (
+        f"windbench experiment={rec.experiment} wind=particles wind.lee_model={lee_model} "
+        f"scene={s['scene']} grid.resolution={s['resolution']} sim.dt={s['dt']} seed={s['seed']}"
+    )
 
 
 def reverse_flow_floor(ref) -> float:
@@ -119,6 +128,7 @@ def run_rows(runs, references) -> pd.DataFrame:
             continue
         row = {k: rec.settings[k] for k in SETTINGS}
         row["lee_model"] = rec.config.get("wind.lee_model") or "paper"
+        row["command"] = run_command(rec, row["lee_model"])
         row["lee_error"] = rec.figures.get("lee_error")
         row["flux_behind_min"] = behind_flux(rec)
         row["wind_seconds_median"] = rec.figures.get("wind_seconds_median")

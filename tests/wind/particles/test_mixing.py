@@ -2,9 +2,9 @@
 code: a point release spreads with variance 2 K t and drifts with the wind; an undisturbed
 log-law wind comes out as itself (a uniform density stays uniform in K(z), the well-mixed
 condition, and the cell estimate is unbiased); the volume flux through every plane behind
-a wall equals the inflow's (the paper's lee loses the blocked part); a surface keeps the
-speed of the wind it turns; the shadow behind a fence is shallow near it and fills in
-downstream; bad settings name their key."""
+a wall equals the inflow's (the paper's lee loses the blocked part, the near wake's cavity
+and eddy keep it); a surface keeps the speed of the wind it turns; the shadow behind a
+fence is shallow near it and fills in downstream; bad settings name their key."""
 
 from __future__ import annotations
 
@@ -221,7 +221,13 @@ def test_same_seed_same_field_other_seed_other_field():
 
 @pytest.mark.parametrize(
     "override",
-    ["wind.lee_model=eddies", "wind.averaging_time=0", "wind.mixing_length_limit=-1"],
+    [
+        "wind.lee_model=eddies",
+        "wind.averaging_time=0",
+        "wind.mixing_length_limit=-1",
+        "wind.recirculation_backflow=1.5",
+        "wind.wake_mixing=-0.1",
+    ],
 )
 def test_bad_mixing_settings_name_the_key(override):
     scene = walled_scene([LOG_WIND])

@@ -129,6 +129,16 @@ class ParticleConfig(WindConfig):
     mixing_length_limit: float = setting(
         MIXING_LENGTH_LIMIT, "m", "mixing lee: Blackadar's lambda of the eddy diffusivity", gt=0
     )
+    recirculation_backflow: float = setting(
+        0.3,
+        "1",
+        "mixing lee: the wake eddy's backflow at the floor over the wind at the box's top",
+        ge=0,
+        le=1,
+    )
+    wake_mixing: float = setting(
+        0.05, "1", "mixing lee: wake eddy diffusivity over (wind at the box's top x height)", ge=0
+    )
     seed: int = setting(0, "1", "random seed (conf/wind/particles.yaml sets ${seed})", ge=0)
 
 
@@ -372,7 +382,7 @@ def settle(model, state, work, n_touched: int, dt: float) -> ParticleState:
     lee = model.mixing
     scale = lee.inverse_density / (model.tables.grid.h**3 * dt)
     factor = -np.expm1(-dt / lee.averaging_time)
-    mixing.blend_cells(state.deposits, scale, factor, state.cells.flags, state.cells.u)
+    mixing.blend_cells(state.deposits, scale, factor, state.cells.flags, lee.eddy, state.cells.u)
     return state
 
 

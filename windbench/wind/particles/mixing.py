@@ -29,6 +29,8 @@ by, a profile's candidates kept with probability f(z) / f_max so that n_i is uni
 Particles are conserved, so the volume flux through any plane is the inflow's, up to the
 diffusive K dn/dx. Cells keep a running mean u <- u + (1 - e^(-dt/T)) (u_step - u),
 T = ``wind.averaging_time``. Sources must be uniform winds entering through the faces.
+Behind each box on the floor the near wake (:mod:`.wake`) adds a separation cavity the
+particles go around, its recirculating eddy to the cells' wind and its shear layer's K.
 """
 
 from __future__ import annotations
@@ -50,6 +52,12 @@ from windbench.wind.particles.tracing import (
     _start_walk,
     first_body_hit,
     first_triangle_hit,
+)
+from windbench.wind.particles.wake import (
+    eddy_field,
+    leave_cavity,
+    wake_diffusivity,
+    wake_rows,
 )
 from windbench.wind.primitives import NO_PROFILE, primitive_velocity, profile_factor
 from windbench.wind.surface_layer import sources_viscosity
@@ -75,6 +83,8 @@ class MixingModel(NamedTuple):
     dz: float  # m
     faces: np.ndarray  # (n_sources, 3, 2) LEAVE | MIRROR | WRAP per source and face
     seed: int
+    wakes: np.ndarray  # (n_wakes, N_WAKE) the obstacles' near wakes (:mod:`.wake`)
+    floor: float  # m: the domain's lowest height
 
 
 class MixStep(NamedTuple):
@@ -162,6 +172,7 @@ class MixingLee:
     rows: np.ndarray  # (n_sources, N_PARAMS) the sources' primitive rows
     ceilings: np.ndarray  # (n_sources,) f_max; 0 for a source without a profile
     averaging_time: float  # s
+    eddy: np.ndarray  # (n_cells, 3) m/s: the wakes' recirculating eddies at the cells
 
     def kept(self, source: int, points: np.ndarray, first: int) -> np.ndarray | None:
         """Mask of a profiled source's candidates kept by the flux weighting (numbers
@@ -178,8 +189,15 @@ def mixing_lee(scene, grid, params, emitters) -> MixingLee:
     """Check the scene's sources and build the mixing lee of ``scene`` on ``grid``."""
     check_sources(scene, emission_specs(scene))
     k, z_first, dz = diffusivity_table(scene, grid, float(params.mixing_length_limit))
-    tables = MixingModel(k, z_first, dz, face_actions(scene), int(params.seed))
     lower, upper = np.asarray(grid.lower, float), np.asarray(grid.upper, float)
+    wakes = wake_rows(
+        scene,
+        lower,
+        float(params.recirculation_backflow),
+        float(params.wake_mixing),
+    )
+    eddy = eddy_field(wakes, lower, float(grid.h), tuple(int(n) for n in grid.shape))
+    tables = MixingModel(k, z_first, dz, face_actions(scene), int(params.seed), wakes, lower[2])
     density = np.array(
         [free_density(p, e, lower, upper) for p, e in zip(scene.sources, emitters, strict=True)]
     )
@@ -194,6 +212,7 @@ def mixing_lee(scene, grid, params, emitters) -> MixingLee:
             ]
         ),
         averaging_time=float(params.averaging_time),
+        eddy=eddy,
     )
 
 
@@ -250,12 +269,18 @@ def _diffusivity(table, z_first, dz, z):
 
 
 @njit(cache=True, inline="always")
-def _random_part(mix, seed_stream, q, z, tau):
-    """r = dK/dz e_z + sqrt(2 K / tau) xi (m/s): the diffusive part of the path velocity."""
-    k, dk = _diffusivity(mix.diffusivity, mix.z_first, mix.dz, z)
+def _random_part(mix, seed_stream, q, p, tau):
+    """r = grad K + sqrt(2 K / tau) xi (m/s): the diffusive part of the path velocity, K
+    the surface layer's K(z) plus the obstacles' wake K_w(p) (:mod:`.wake`)."""
+    k, dk = _diffusivity(mix.diffusivity, mix.z_first, mix.dz, p[2])
+    kw, gx, gy, gz = wake_diffusivity(mix.wakes, p, mix.floor)
     u0, u1, u2 = unit_triple(mix.seed, seed_stream, q)
-    amp = SQRT3 * np.sqrt(2.0 * k / tau) if tau > 0.0 else 0.0
-    return (amp * (2.0 * u0 - 1.0), amp * (2.0 * u1 - 1.0), amp * (2.0 * u2 - 1.0) + dk)
+    amp = SQRT3 * np.sqrt(2.0 * (k + kw) / tau) if tau > 0.0 else 0.0
+    return (
+        amp * (2.0 * u0 - 1.0) + gx,
+        amp * (2.0 * u1 - 1.0) + gy,
+        amp * (2.0 * u2 - 1.0) + dk + gz,
+    )
 
 
 @njit(cache=True, inline="always")
@@ -437,7 +462,7 @@ def trace_mixing(model, mix, cloth, cells, deposits, particles, step, work):
         tau = step.dt if q < step.n_old else step.new_durations[q - step.n_old]
         p = (positions[q, 0], positions[q, 1], positions[q, 2])
         primitive_velocity(kinds[s], prims[s], p[0], p[1], p[2], wc)
-        a, r = (wc[0], wc[1], wc[2]), _random_part(mix, step.index, q, p[2], tau)
+        a, r = (wc[0], wc[1], wc[2]), _random_part(mix, step.index, q, p, tau)
         remaining, events, alive = tau, 0, True
         while alive and remaining > 0.0 and events < rules.max_hits:
             e = ((a[0] + r[0]) * remaining, (a[1] + r[1]) * remaining, (a[2] + r[2]) * remaining)
@@ -483,6 +508,7 @@ def trace_mixing(model, mix, cloth, cells, deposits, particles, step, work):
             remaining *= 1.0 - t_end
             events += 1
         if alive and ages[q] + tau <= rules.max_age:
+            p = leave_cavity(mix.wakes, p, mix.floor)
             positions[n_alive, 0], positions[n_alive, 1], positions[n_alive, 2] = p
             sources[n_alive], ages[n_alive] = s, ages[q] + tau
             n_alive += 1
@@ -490,14 +516,15 @@ def trace_mixing(model, mix, cloth, cells, deposits, particles, step, work):
 
 
 @njit(cache=True)
-def blend_cells(deposits, scale, factor, flags, u):
-    """u <- u + factor (sum_s scale_s d_{c,s} - u) in every air cell (the running mean of
-    the step's wind, scale_s = 1 / (n_s h^3 dt)); the deposits are cleared."""
+def blend_cells(deposits, scale, factor, flags, eddy, u):
+    """u <- u + factor (sum_s scale_s d_{c,s} + e_c - u) in every air cell (the running mean
+    of the step's wind, scale_s = 1 / (n_s h^3 dt), plus the wakes' eddy e_c); the
+    deposits are cleared."""
     for c in range(u.shape[0]):
         if flags[c] & SOLID:
             continue
         for ax in range(3):
-            step_wind = 0.0
+            step_wind = eddy[c, ax]
             for s in range(scale.shape[0]):
                 step_wind += deposits[c, s, ax] * scale[s]
                 deposits[c, s, ax] = 0.0
