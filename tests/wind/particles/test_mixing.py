@@ -21,6 +21,8 @@ from windbench.scenes import build_scene
 from windbench.wind.base import Obstacles
 from windbench.wind.particles import ParticleWind
 from windbench.wind.particles.mixing import (
+    LEAVE,
+    MIRROR,
     _bounce,
     diffusivity_table,
     escape_direction,
@@ -152,14 +154,28 @@ def test_head_on_air_leaves_a_box_face_toward_its_nearest_free_edge():
     table = body_table(fence.bodies)
     lo, hi = np.asarray(fence.lower, float), np.asarray(fence.upper, float)
     n = (-1.0, 0.0, 0.0)
+    walls = np.full((3, 2), MIRROR, dtype=np.int64)  # every face a wall: edges on them closed
     # spanning the channel on the ground: only the top edge is free
-    assert escape_direction(table, 0, (3.0, 1.0, 0.2), n, lo, hi) == (0.0, 0.0, 1.0)
+    assert escape_direction(table, 0, (3.0, 1.0, 0.2), n, lo, hi, walls) == (0.0, 0.0, 1.0)
     wall = walled_scene([LOG_WIND], [{"type": "box", "min": [3, 1, 0], "max": [4, 2, 3]}])
     table = body_table(wall.bodies)
     # half the width, against the y_max wall: the free side edge or the top, the nearer
-    assert escape_direction(table, 0, (3.0, 1.2, 1.0), n, lo, hi) == (0.0, -1.0, 0.0)
-    assert escape_direction(table, 0, (3.0, 1.8, 2.7), n, lo, hi) == (0.0, 0.0, 1.0)
-    assert escape_direction(table, -1, (3.0, 1.8, 2.7), n, lo, hi) == (0.0, 0.0, 0.0)
+    assert escape_direction(table, 0, (3.0, 1.2, 1.0), n, lo, hi, walls) == (0.0, -1.0, 0.0)
+    assert escape_direction(table, 0, (3.0, 1.8, 2.7), n, lo, hi, walls) == (0.0, 0.0, 1.0)
+    assert escape_direction(table, -1, (3.0, 1.8, 2.7), n, lo, hi, walls) == (0.0, 0.0, 0.0)
+
+
+def test_a_wall_across_the_domain_sends_head_on_air_to_the_outflow_face():
+    full = {"type": "box", "min": [3, 0, 0], "max": [4, 2, 4]}  # the whole cross-section
+    scene = walled_scene([LOG_WIND], [full])
+    table = body_table(scene.bodies)
+    lo, hi = np.asarray(scene.lower, float), np.asarray(scene.upper, float)
+    walls = np.full((3, 2), MIRROR, dtype=np.int64)
+    head_on = (table, 0, (3.0, 1.0, 1.0), (-1.0, 0.0, 0.0), lo, hi)
+    assert escape_direction(*head_on, walls) == (0.0, 0.0, 0.0)  # closed on every side
+    top_open = walls.copy()
+    top_open[2, 1] = LEAVE  # an outflow face over the wall: its top edge is open
+    assert escape_direction(*head_on, top_open) == (0.0, 0.0, 1.0)
 
 
 def _wall_flux(lee_model: str) -> tuple[np.ndarray, np.ndarray]:

@@ -315,11 +315,14 @@ def _bounce(a, r, n, escape):
 
 
 @njit(cache=True)
-def escape_direction(table, b, p, n, lower, upper):
+def escape_direction(table, b, p, n, lower, upper, faces):
     """Where the air that meets body b head-on at p (normal n) leaves its face: for a box,
-    the direction along the face to its nearest edge that stands free of the domain's
-    faces (stagnation flow on a plate splits toward its edges; an edge on the ground or a
-    side wall is closed), (0, 0, 0) if none is free or for any other body."""
+    the direction along the face to its nearest open edge (stagnation flow on a plate
+    splits toward its edges), (0, 0, 0) if none is open or for any other body. An edge is
+    open if it stands free of the domain's faces or on a face the particle leaves by
+    (``faces``: the source's (3, 2) LEAVE | MIRROR | WRAP, :func:`face_actions`): an edge
+    on the ground or a side wall is closed, one on an outflow face open, so the air a wall
+    across the whole domain stops leaves by the outflow instead of piling up."""
     if b < 0 or table.kinds[b] != BOX:
         return (0.0, 0.0, 0.0)
     prm = table.params[b]
@@ -327,9 +330,11 @@ def escape_direction(table, b, p, n, lower, upper):
     for ax in range(3):
         if abs(n[ax]) > 0.5:  # the face's own axis
             continue
-        if prm[ax] > lower[ax] + EDGE_SLACK and p[ax] - prm[ax] < best:
+        low_open = prm[ax] > lower[ax] + EDGE_SLACK or faces[ax, 0] == LEAVE
+        high_open = prm[ax + 3] < upper[ax] - EDGE_SLACK or faces[ax, 1] == LEAVE
+        if low_open and p[ax] - prm[ax] < best:
             best, axis, sign = p[ax] - prm[ax], ax, -1.0
-        if prm[ax + 3] < upper[ax] - EDGE_SLACK and prm[ax + 3] - p[ax] < best:
+        if high_open and prm[ax + 3] - p[ax] < best:
             best, axis, sign = prm[ax + 3] - p[ax], ax, 1.0
     if axis < 0:
         return (0.0, 0.0, 0.0)
@@ -499,7 +504,9 @@ def trace_mixing(model, mix, cloth, cells, deposits, particles, step, work):
                     end[1] + rules.delta * n[1],
                     end[2] + rules.delta * n[2],
                 )
-                escape = escape_direction(model.bodies.table, body, end, n, g.lower, g.upper)
+                escape = escape_direction(
+                    model.bodies.table, body, end, n, g.lower, g.upper, actions[s]
+                )
                 a, r = _bounce(a, r, n, escape)
             elif inside:  # the whole path walked
                 p, remaining = end, 0.0
