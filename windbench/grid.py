@@ -102,8 +102,17 @@ class Grid:
         """Trilinear sample of a cell-centred field ``(nx, ny, nz, c)`` at world points."""
         pts = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=np.float64)))
         out = np.empty((pts.shape[0], field.shape[-1]), dtype=np.float64)
-        trilinear_sample(np.ascontiguousarray(field), self.centre_origin, self.h, pts, out)
+        trilinear_sample(_read_only(field), self.centre_origin, self.h, pts, out)
         return out
+
+
+def _read_only(field: np.ndarray) -> np.ndarray:
+    """A C-contiguous read-only view of ``field`` (no copy when it is C-contiguous already):
+    numba types read-only and writable arrays apart, so the kernels that only read a field
+    get one type whichever backend produced it, and compile once."""
+    view = np.ascontiguousarray(field).view()
+    view.flags.writeable = False
+    return view
 
 
 @njit(cache=True, inline="always")

@@ -11,14 +11,16 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def central_divergence(u, solid, h, out):
-    """out[i,j,k] = div u by central differences where all six neighbours are air, else NaN."""
+    """out[i,j,k] = div u by central differences where all six neighbours are air, else NaN.
+    Serial: a per-record figure on the cell-centred field, where a parallel loop's
+    compilation costs more than it saves."""
     nx, ny, nz, _ = u.shape
-    for i in prange(nx):
+    for i in range(nx):
         for j in range(ny):
             for k in range(nz):
                 out[i, j, k] = np.nan

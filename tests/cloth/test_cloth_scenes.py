@@ -56,7 +56,11 @@ def test_flag_in_uniform_wind_trails_downwind(tmp_path):
     assert float(ds.max_stretch.max()) < 0.05
 
 
-@pytest.mark.parametrize("resolution", ["[40,25]", "[64,64]", "[100,60]"])
+# 100 x 60 hangs like 64 x 64 (the strain limit keeps the collapsed corner's edges): a
+# study, outside the CI suite, which 64 x 64 covers
+@pytest.mark.parametrize(
+    "resolution", ["[40,25]", "[64,64]", pytest.param("[100,60]", marks=pytest.mark.slow)]
+)
 def test_flag_hanging_from_its_pole_stretches_under_five_percent(resolution):
     """In still air the flag hangs off its pole, the whole weight through the top
     corner. The threads carry it (edge by edge, ``cloth.threads=false``, the default

@@ -149,7 +149,16 @@ def _distance_passes(c, frame, iterations, p, lam, chain_work):
     alpha, scale = frame.edge_alpha, frame.edge_scale
     for it in range(iterations):
         solve_chains(
-            p, c.inv_mass, c.chain_ptr, c.chain_vert, c.edge_rest, alpha, scale, lam, chain_work
+            p,
+            c.inv_mass,
+            c.chain_ptr,
+            c.chain_vert,
+            c.edge_rest,
+            alpha,
+            scale,
+            lam,
+            chain_work,
+            0.0,
         )
         if it == 0:
             project_shear_edges(p, c.inv_mass, c.edges, c.edge_rest, alpha, scale, lam, c.n_stretch)

@@ -44,14 +44,16 @@ def face_flux(u, v, w, target, out):
                 out[i, j, k] = _outward_flux(u, v, w, i, j, k) - target[i, j, k]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def divergence_norms(u, v, w, target, solid):
-    """(max, sum of squares, count) of h div u - target over the air cells, by planes."""
+    """(max, sum of squares, count) of h div u - target over the air cells, by planes.
+    Serial: a once-per-step figure, one pass over the field, where a parallel loop's
+    compilation costs more than it saves."""
     nx = solid.shape[0]
     peak = np.zeros(nx)
     squares = np.zeros(nx)
     count = np.zeros(nx, dtype=np.int64)
-    for i in prange(nx):
+    for i in range(nx):
         peak[i], squares[i], count[i] = _divergence_plane(u, v, w, target, solid, np.int64(i))
     return peak.max(), ordered_sum(squares), count.sum()
 
@@ -59,8 +61,8 @@ def divergence_norms(u, v, w, target, solid):
 @njit(cache=True, error_model="numpy")
 def _divergence_plane(u, v, w, target, solid, i):
     """(max, sum of squares, count) of |h div u - target| over the air cells of plane i
-    (the parallel loop's body in a function of its own, with the error model numba gives
-    such a body: less to compile, the same bits)."""
+    (a function of its own, with the error model numba gives a parallel loop's body: the
+    same bits whether its caller runs the planes in parallel or not)."""
     top, sq, cnt = 0.0, 0.0, 0
     for j in range(solid.shape[1]):
         for k in range(solid.shape[2]):
@@ -73,11 +75,11 @@ def _divergence_plane(u, v, w, target, solid, i):
     return top, sq, cnt
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def max_abs(q):
-    """max |q| (planes in parallel; a max is order-independent)."""
+    """max |q| (serial, like :func:`divergence_norms`: a once-per-step figure)."""
     peak = np.zeros(q.shape[0])
-    for i in prange(q.shape[0]):
+    for i in range(q.shape[0]):
         top = 0.0
         for j in range(q.shape[1]):
             for k in range(q.shape[2]):
