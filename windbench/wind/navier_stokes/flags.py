@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
-# LLVM may contract a * b + c into one fused multiply-add and reorder sums (measured, one
-# core, A/B in one process: 11-15% less time for the face pass and the backtrace each,
-# about 5% per smoothing sweep of the pressure multigrid). Not the no-NaN/no-infinity assumptions,
-# so a NaN still propagates and the run stops after the step with the reason.
-FAST_MATH = {"contract", "reassoc", "nsz", "arcp"}
+# No fast-math flags: strict IEEE arithmetic, so a kernel gives the same bits whether numba
+# compiled its callees into it in this process or linked them from its on-disk cache. With
+# LLVM free to contract a * b + c into fused multiply-adds and to reorder sums, which it did
+# only where a callee was inlined, a run with a cold cache and one with a warm cache drifted
+# apart (1e-10 after a step; the chaotic wake amplified it to 0.1 m/s over a few hundred).
+# Same configuration and seed give the same numbers; that costs some speed in the face pass,
+# the backtrace and the multigrid sweeps (experiments/results/bench_ns.csv).
+FAST_MATH: set[str] = set()
