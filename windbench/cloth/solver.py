@@ -43,11 +43,12 @@ the accumulated positive work ``W = sum max(0, sum_i (f_i + m_i g) . dx_i)`` (pl
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, objmode
 
 from windbench.cloth.collision import body_boxes, contact_vertex, max_penetration
 from windbench.cloth.constraints import (
@@ -61,7 +62,14 @@ from windbench.cloth.constraints import (
     project_tethers,
     solve_chains,
 )
+from windbench.cloth.edge_contact import surface_contacts, surface_penetration
 from windbench.cloth.model import ClothModel, ClothState
+from windbench.cloth.self_contact import (
+    SelfContact,
+    self_contact_model,
+    self_contacts,
+    self_intersections,
+)
 from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import BodyTable, body_table
@@ -117,6 +125,7 @@ class XPBDModel(NamedTuple):
     constraints: Constraints
     contacts: Contacts
     settings: Settings
+    self_contact: SelfContact
 
 
 class FrameConstants(NamedTuple):
@@ -166,6 +175,33 @@ def _contacts(contacts, inv_mass, p, xp, normal, clear):
 
 
 @njit(cache=True)
+def _clock():
+    """Process CPU seconds (read from Python: the contacts' own phase)."""
+    with objmode(t="f8"):
+        t = time.process_time()
+    return t
+
+
+@njit(cache=True)
+def _all_contacts(model, p, xp, normal, clear, timer):
+    """Step 3: the cloth against itself and the other cloths
+    (:func:`~windbench.cloth.self_contact.self_contacts`, with ``cloth.self_collision``),
+    then its edges and triangles (:func:`~windbench.cloth.edge_contact.surface_contacts`)
+    and its vertices (:func:`_contacts`) against the bodies, so that the bodies have the
+    last word; the CPU seconds spent are added to ``timer[0]``."""
+    c = model.constraints
+    start = _clock()
+    if model.self_contact.on:
+        self_contacts(model.self_contact, c.edges, c.inv_mass, p, xp)
+    if model.contacts.bodies.kinds.shape[0] > 0:
+        surface_contacts(
+            model.contacts, c.inv_mass, c.edges, model.self_contact.triangles, p, clear
+        )
+        _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
+    timer[0] += _clock() - start
+
+
+@njit(cache=True)
 def _contacts_moved(contacts, inv_mass, p, xp, normal, clear, moved):
     """The contacts of step 3 for the vertices flagged in ``moved`` alone (then unflagged)."""
     for i in range(p.shape[0]):
@@ -191,7 +227,7 @@ def _strain_limit(model, frame, p, xp, work, normal):
     where the wind presses it on the body its largest stretch stays above the limit, by as
     much as ``max_stretch`` and ``over_strain_limit`` (:meth:`XPBDCloth.stretch`) record."""
     c, s = model.constraints, model.settings
-    _, lam, chain_work, moved, clear, stamps = work
+    _, lam, chain_work, moved, clear, stamps, _ = work
     stamps[1][:] = -1  # every edge is tested in the first pass
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     ptr = c.chain_ptr[: c.n_lattice_chains + 1]
@@ -254,11 +290,10 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     h = frame.dt / s.substeps
     inv_h = 1.0 / h
     p, vv = out
-    xp, lam, chain_work, _, clear, _ = work
+    xp, lam, chain_work, _, clear, _, timer = work
     xp[:] = x
     vv[:] = v
     normal = np.empty(3)
-    has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     for sub in range(s.substeps):
         _predict(c, f_ext, h, xp, p, vv)  # 1.
         lam[:] = 0.0  # XPBD multipliers of the substep
@@ -266,8 +301,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
         if (sub + 1) % frame.bend_every == 0:  # 2b. soft bending: every bend_every-th
             project_hinges(p, c.inv_mass, c.hinges, c.hinge_rest, frame.hinge_alpha)
         project_tethers(p, c.inv_mass, c.tether_anchor, c.tether_length)  # 2c.
-        if has_bodies:  # 3. contacts
-            _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
+        _all_contacts(model, p, xp, normal, clear, timer)  # 3.
         _strain_limit(model, frame, p, xp, work, normal)  # 3b.
         for i in range(x.shape[0]):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
@@ -307,13 +341,18 @@ class SolverSettings:
     gravity: float
     margin: float
     friction: float
+    self_collision: bool
+    thickness: float
     energy_limit: float
 
     @classmethod
     def from_params(cls, params) -> SolverSettings:
         """Check every value; ConfigError naming the first bad key."""
-        if not isinstance(params.threads, bool):
-            raise ConfigError("cloth.threads", f"must be true or false, got {params.threads!r}")
+        for key in ("threads", "self_collision"):
+            if not isinstance(getattr(params, key), bool):
+                raise ConfigError(
+                    f"cloth.{key}", f"must be true or false, got {getattr(params, key)!r}"
+                )
         return cls(
             substeps=_count(params, "substeps"),
             edge_iterations=_count(params, "edge_iterations"),
@@ -323,6 +362,8 @@ class SolverSettings:
             gravity=_number(params.gravity, "cloth.gravity", False),
             margin=_number(params.collision_margin, "cloth.collision_margin", False),
             friction=_number(params.friction, "cloth.friction", False),
+            self_collision=params.self_collision,
+            thickness=_number(params.thickness, "cloth.thickness", True),
             energy_limit=_number(params.energy_limit, "cloth.energy_limit", True),
         )
 
@@ -523,6 +564,7 @@ class Workspace:
     moved: np.ndarray  # (n,) bool: vertices the edge-by-edge strain limit moved
     clear: tuple  # contact clearances: probe (n, 3), clearance (n,)
     stamps: tuple  # the strain limit's clocks (limit_edges): per vertex, per edge, clock (1,)
+    timer: np.ndarray  # (1,) seconds spent in the contacts of the last frame
     frame: FrameConstants | None = None
 
 
@@ -531,7 +573,11 @@ class XPBDCloth:
 
     stats_units = {
         "kinetic_energy": ("kinetic energy of the cloth", "J"),
-        "max_penetration": ("deepest penetration of a cloth vertex into a body", "m"),
+        "max_penetration": (
+            "deepest penetration of a cloth vertex, edge or triangle into a body",
+            "m",
+        ),
+        "self_intersections": ("number of intersecting pairs of cloth triangles", "1"),
         "max_stretch": ("largest relative elongation of a stretch edge", "1"),
         "over_strain_limit": (
             "fraction of stretch edges beyond the strain limit, longer than "
@@ -561,6 +607,9 @@ class XPBDCloth:
                 body_table(tuple(bodies)), body_boxes(tuple(bodies), s.margin), s.margin, s.friction
             ),
             Settings(s.substeps, s.edge_iterations, s.strain_limit, s.limit_passes),
+            self_contact_model(
+                model.rest_positions, model.triangles, s.self_collision, s.thickness
+            ),
         )
         c = self.tables.constraints
         rest = np.ascontiguousarray(model.rest_positions, np.float64)
@@ -577,6 +626,7 @@ class XPBDCloth:
                 np.full(n_e, -1, np.int64),
                 np.zeros(1, np.int64),
             ),
+            np.zeros(1),
         )
 
     def frame_constants(self, dt: float) -> FrameConstants:
@@ -593,8 +643,15 @@ class XPBDCloth:
         frame = self.frame_constants(float(dt))
         out = (np.empty_like(x), np.empty_like(v))
         w = self.workspace
+        w.timer[0] = 0.0
         work, energy, finite = xpbd_frame(
-            self.tables, frame, x, v, f, out, (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps)
+            self.tables,
+            frame,
+            x,
+            v,
+            f,
+            out,
+            (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps, w.timer),
         )
         frames = state.frames + 1
         if not finite:
@@ -637,13 +694,21 @@ class XPBDCloth:
         return self.stretch(positions)[0]
 
     def stats(self, state: ClothState) -> dict[str, float]:
-        """Figures recorded per step: kinetic energy (J), deepest body penetration (m),
-        largest stretch of a stretch edge and the fraction beyond the strain limit."""
+        """Figures recorded per step: kinetic energy (J), deepest body penetration of a
+        vertex, edge or triangle (m), largest stretch of a stretch edge and the fraction
+        beyond the strain limit, intersecting triangle pairs, and the CPU seconds of the
+        last step's contacts (a phase of ``step_seconds``)."""
         bodies, boxes, _, _ = self.tables.contacts
+        c, sc = self.tables.constraints, self.tables.self_contact
         top, over = self.stretch(state.positions)
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
-            "max_penetration": max_penetration(bodies, boxes, state.positions),
+            "max_penetration": max(
+                max_penetration(bodies, boxes, state.positions),
+                surface_penetration(bodies, boxes, state.positions, c.edges, sc.triangles),
+            ),
             "max_stretch": top,
             "over_strain_limit": over,
+            "self_intersections": self_intersections(sc, state.positions),
+            "contacts_seconds": float(self.workspace.timer[0]),
         }

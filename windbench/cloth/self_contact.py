@@ -1,0 +1,330 @@
+"""Self-collision and cloth-cloth collision: vertices against triangles through a spatial hash.
+
+The paper's cloth system [MKE03] keeps cloth from passing through itself. All cloth pieces
+of a scene are one mesh here (:class:`~windbench.cloth.model.ClothModel`), so one pass
+handles a flag folding on itself and two flags touching alike. It is thickness-based, not
+continuous: a vertex i closer than ``cloth.thickness`` to a triangle (a, b, c) it does not
+belong to, with its projection q = sum_k beta_k x_k inside the triangle, is pushed back to
+the thickness on the side it lay on at the start of the substep (sign s of its distance to
+the triangle's plane then):
+
+    C = s (x_i - q) . n - thickness < 0,   den = w_i + sum_k beta_k^2 w_k,
+    dx_i = -C w_i s n / den,   dx_k = C beta_k w_k s n / den.
+
+A vertex that crosses a triangle within one substep is thus brought back while it lies
+within 2 x thickness of the triangle's box. Two edges that cross without a vertex near a
+triangle (a sheet draped over another's border) are kept apart the same way at their
+closest points (:func:`push_edges`, n = e1 x e2).
+
+Broad phase: a spatial hash (:func:`build_hash`) of the triangles' boxes grown by
+2 x thickness on a lattice of cells ``cell`` wide (the mean rest edge length, at least
+2 x thickness), rebuilt every substep; a vertex reads the bucket of its own cell. Two
+cells that share a bucket only add candidates, which the exact test rejects.
+
+The figure :func:`self_intersections` counts intersecting triangle pairs: two triangles
+without a common vertex of which an edge of one crosses the other (segment-triangle test,
+Moeller-Trumbore), through the same hash.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+TABLE_PER_TRIANGLE = 2  # hash buckets per triangle
+_P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner et al. 2003 hash primes
+
+
+class SelfContact(NamedTuple):
+    """The fixed tables of the self-contact pass."""
+
+    on: bool  # cloth.self_collision
+    triangles: np.ndarray  # (m, 3) global vertex ids, every cloth
+    thickness: float  # m
+    cell: float  # m: hash cell size
+
+
+def self_contact_model(rest, triangles, on: bool, thickness: float) -> SelfContact:
+    """:class:`SelfContact` with the cell size of the module docstring."""
+    tri = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if tri.shape[0]:
+        sides = np.linalg.norm(rest[tri[:, [1, 2, 0]]] - rest[tri], axis=2)
+        mean_edge = float(sides.mean())
+    else:
+        mean_edge = 1.0
+    return SelfContact(bool(on), tri, float(thickness), max(mean_edge, 2.0 * thickness, 1e-6))
+
+
+@njit(cache=True, inline="always")
+def _bucket(ix, iy, iz, size):
+    return ((ix * _P1) ^ (iy * _P2) ^ (iz * _P3)) % size
+
+
+@njit(cache=True, inline="always")
+def _cell_range(p, tri, grow, cell):
+    """Lowest and highest cell indices (3,) of the box of triangle ``tri`` grown by ``grow``."""
+    lo, hi = np.empty(3, np.int64), np.empty(3, np.int64)
+    for a in range(3):
+        low = min(p[tri[0], a], p[tri[1], a], p[tri[2], a]) - grow
+        high = max(p[tri[0], a], p[tri[1], a], p[tri[2], a]) + grow
+        lo[a], hi[a] = np.int64(np.floor(low / cell)), np.int64(np.floor(high / cell))
+    return lo, hi
+
+
+@njit(cache=True)
+def build_hash(p, triangles, grow, cell):
+    """(start (size + 1,), entries): the triangles whose box grown by ``grow`` meets a cell,
+    bucket by bucket (counting sort): bucket k holds entries[start[k]:start[k + 1]]."""
+    size = max(1, TABLE_PER_TRIANGLE * triangles.shape[0])
+    start = np.zeros(size + 1, np.int64)
+    for f in range(triangles.shape[0]):
+        lo, hi = _cell_range(p, triangles[f], grow, cell)
+        for ix in range(lo[0], hi[0] + 1):
+            for iy in range(lo[1], hi[1] + 1):
+                for iz in range(lo[2], hi[2] + 1):
+                    start[_bucket(ix, iy, iz, size) + 1] += 1
+    for k in range(size):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    entries = np.empty(start[size], np.int64)
+    for f in range(triangles.shape[0]):
+        lo, hi = _cell_range(p, triangles[f], grow, cell)
+        for ix in range(lo[0], hi[0] + 1):
+            for iy in range(lo[1], hi[1] + 1):
+                for iz in range(lo[2], hi[2] + 1):
+                    k = _bucket(ix, iy, iz, size)
+                    entries[fill[k]] = f
+                    fill[k] += 1
+    return start, entries
+
+
+@njit(cache=True, inline="always")
+def _plane(p, tri):
+    """Unit normal (3,) of triangle ``tri`` at ``p`` and twice its area."""
+    e1 = p[tri[1]] - p[tri[0]]
+    e2 = p[tri[2]] - p[tri[0]]
+    n = np.cross(e1, e2)
+    area2 = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+    if area2 > 0.0:
+        n /= area2
+    return n, area2
+
+
+@njit(cache=True, inline="always")
+def _barycentric(p, tri, x, n, area2):
+    """Barycentric coordinates (3,) of the projection of x on the plane of ``tri``."""
+    beta = np.empty(3)
+    for k in range(3):
+        a, b = p[tri[(k + 1) % 3]], p[tri[(k + 2) % 3]]
+        beta[k] = np.dot(np.cross(b - a, x - a), n) / area2
+    return beta
+
+
+@njit(cache=True)
+def push_vertex(p, xp, inv_mass, i, tri, thickness):
+    """The vertex-triangle contact of vertex i and triangle ``tri`` (module docstring).
+    Returns C (0 when they do not touch)."""
+    n, area2 = _plane(p, tri)
+    if area2 == 0.0:
+        return 0.0
+    dist = np.dot(p[i] - p[tri[0]], n)
+    if abs(dist) >= 2.0 * thickness:
+        return 0.0
+    beta = _barycentric(p, tri, p[i], n, area2)
+    if beta.min() < 0.0:
+        return 0.0
+    n0, a0 = _plane(xp, tri)
+    side = np.dot(xp[i] - xp[tri[0]], n0) if a0 > 0.0 else dist
+    s = 1.0 if (side if side != 0.0 else dist) >= 0.0 else -1.0
+    c = s * dist - thickness
+    if c >= 0.0:
+        return 0.0
+    den = inv_mass[i]
+    for k in range(3):
+        den += beta[k] * beta[k] * inv_mass[tri[k]]
+    if den <= 0.0:
+        return 0.0
+    g = -c * s / den
+    for a in range(3):
+        p[i, a] += g * inv_mass[i] * n[a]
+        for k in range(3):
+            p[tri[k], a] -= g * beta[k] * inv_mass[tri[k]] * n[a]
+    return c
+
+
+@njit(cache=True, inline="always")
+def _segment_parameters(p0, p1, q0, q1):
+    """(s, u) of the closest points p0 + s (p1 - p0), q0 + u (q1 - q0) of two segments
+    (clamped to [0, 1]; parallel segments: s = 0)."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a, e, f = np.dot(d1, d1), np.dot(d2, d2), np.dot(d2, r)
+    b, c = np.dot(d1, d2), np.dot(d1, r)
+    den = a * e - b * b
+    s = min(1.0, max(0.0, (b * f - c * e) / den)) if den > 1e-12 * a * e else 0.0
+    u = (b * s + f) / e if e > 0.0 else 0.0
+    if u < 0.0:
+        u, s = 0.0, min(1.0, max(0.0, -c / a)) if a > 0.0 else 0.0
+    elif u > 1.0:
+        u, s = 1.0, min(1.0, max(0.0, (b - c) / a)) if a > 0.0 else 0.0
+    return s, u
+
+
+@njit(cache=True)
+def push_edges(p, xp, inv_mass, i, j, k, l, thickness):
+    """The edge-edge contact of edges i-j and k-l: their closest points q1, q2 (both inside
+    the edges) kept ``thickness`` apart along n = e1 x e2 on the side they lay on at the
+    start of the substep: C = s (q1 - q2) . n - thickness, the four vertices moved with
+    their barycentric weights and inverse masses. Returns C (0 when they do not touch)."""
+    s, u = _segment_parameters(p[i], p[j], p[k], p[l])
+    if s <= 0.0 or s >= 1.0 or u <= 0.0 or u >= 1.0:
+        return 0.0  # an end point: the vertex-triangle contacts' business
+    n = np.cross(p[j] - p[i], p[l] - p[k])
+    norm = np.sqrt(np.dot(n, n))
+    if norm == 0.0:
+        return 0.0
+    n /= norm
+    gap = (1.0 - s) * p[i] + s * p[j] - (1.0 - u) * p[k] - u * p[l]
+    dist = np.dot(gap, n)
+    if abs(dist) >= thickness or np.dot(gap, gap) >= thickness * thickness:
+        return 0.0
+    before = (1.0 - s) * xp[i] + s * xp[j] - (1.0 - u) * xp[k] - u * xp[l]
+    side = np.dot(before, n)
+    sgn = 1.0 if (side if side != 0.0 else dist) >= 0.0 else -1.0
+    c = sgn * dist - thickness
+    w = np.array([(1.0 - s), s, -(1.0 - u), -u])
+    ids = np.array([i, j, k, l])
+    den = 0.0
+    for a in range(4):
+        den += w[a] * w[a] * inv_mass[ids[a]]
+    if c >= 0.0 or den <= 0.0:
+        return 0.0
+    g = -c * sgn / den
+    for a in range(4):
+        for b in range(3):
+            p[ids[a], b] += g * w[a] * inv_mass[ids[a]] * n[b]
+    return c
+
+
+@njit(cache=True)
+def _edge_contacts(sc, edges, inv_mass, p, xp, start, entries):
+    """Every edge against the edges of the triangles hashed near it (:func:`push_edges`)."""
+    _, triangles, thickness, cell = sc
+    size = start.shape[0] - 1
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        if inv_mass[i] + inv_mass[j] == 0.0:
+            continue
+        lo, hi = np.empty(3, np.int64), np.empty(3, np.int64)
+        for a in range(3):
+            lo[a] = np.int64(np.floor((min(p[i, a], p[j, a]) - thickness) / cell))
+            hi[a] = np.int64(np.floor((max(p[i, a], p[j, a]) + thickness) / cell))
+        for ix in range(lo[0], hi[0] + 1):
+            for iy in range(lo[1], hi[1] + 1):
+                for iz in range(lo[2], hi[2] + 1):
+                    k = _bucket(ix, iy, iz, size)
+                    for m in range(start[k], start[k + 1]):
+                        tri = triangles[entries[m]]
+                        for t in range(3):
+                            a, b = tri[t], tri[(t + 1) % 3]
+                            if a != i and a != j and b != i and b != j:
+                                push_edges(p, xp, inv_mass, i, j, a, b, thickness)
+
+
+@njit(cache=True)
+def self_contacts(sc, edges, inv_mass, p, xp):
+    """One pass of vertex-triangle contacts over every vertex, then of edge-edge contacts
+    over every edge (module docstring)."""
+    _, triangles, thickness, cell = sc
+    if triangles.shape[0] == 0:
+        return
+    start, entries = build_hash(p, triangles, 2.0 * thickness, cell)
+    size = start.shape[0] - 1
+    for i in range(p.shape[0]):
+        k = _bucket(
+            np.int64(np.floor(p[i, 0] / cell)),
+            np.int64(np.floor(p[i, 1] / cell)),
+            np.int64(np.floor(p[i, 2] / cell)),
+            size,
+        )
+        for j in range(start[k], start[k + 1]):
+            tri = triangles[entries[j]]
+            if tri[0] == i or tri[1] == i or tri[2] == i:
+                continue
+            if inv_mass[i] == 0.0 and inv_mass[tri[0]] + inv_mass[tri[1]] + inv_mass[tri[2]] == 0:
+                continue
+            push_vertex(p, xp, inv_mass, i, tri, thickness)
+    _edge_contacts(sc, edges, inv_mass, p, xp, start, entries)
+
+
+@njit(cache=True)
+def segment_crosses(x0, x1, v0, v1, v2):
+    """Whether the segment x0-x1 meets the triangle v0 v1 v2 (Moeller-Trumbore)."""
+    d = x1 - x0
+    e1, e2 = v1 - v0, v2 - v0
+    h = np.cross(d, e2)
+    det = np.dot(e1, h)
+    if abs(det) < 1e-300:
+        return False
+    s = x0 - v0
+    u = np.dot(s, h) / det
+    if u < 0.0 or u > 1.0:
+        return False
+    q = np.cross(s, e1)
+    v = np.dot(d, q) / det
+    if v < 0.0 or u + v > 1.0:
+        return False
+    t = np.dot(e2, q) / det
+    return 0.0 <= t <= 1.0
+
+
+@njit(cache=True, inline="always")
+def _share_vertex(a, b):
+    for u in range(3):
+        for v in range(3):
+            if a[u] == b[v]:
+                return True
+    return False
+
+
+@njit(cache=True)
+def triangles_cross(p, a, b):
+    """Whether an edge of triangle ``a`` crosses triangle ``b`` or one of b's crosses a."""
+    for first, second in ((a, b), (b, a)):
+        v0, v1, v2 = p[second[0]], p[second[1]], p[second[2]]
+        for k in range(3):
+            if segment_crosses(p[first[k]], p[first[(k + 1) % 3]], v0, v1, v2):
+                return True
+    return False
+
+
+@njit(cache=True)
+def _crossing_pairs(p, triangles, cell):
+    """Keys f * m + g (f < g) of the intersecting triangle pairs, with repeats."""
+    m = triangles.shape[0]
+    start, entries = build_hash(p, triangles, 0.0, cell)
+    size = start.shape[0] - 1
+    found = [np.int64(0) for _ in range(0)]
+    for f in range(m):
+        lo, hi = _cell_range(p, triangles[f], 0.0, cell)
+        for ix in range(lo[0], hi[0] + 1):
+            for iy in range(lo[1], hi[1] + 1):
+                for iz in range(lo[2], hi[2] + 1):
+                    k = _bucket(ix, iy, iz, size)
+                    for j in range(start[k], start[k + 1]):
+                        g = entries[j]
+                        if g <= f or _share_vertex(triangles[f], triangles[g]):
+                            continue
+                        if triangles_cross(p, triangles[f], triangles[g]):
+                            found.append(f * m + g)
+    return np.array(found, dtype=np.int64)
+
+
+def self_intersections(sc: SelfContact, positions) -> int:
+    """The number of intersecting pairs of triangles without a common vertex (module
+    docstring), all cloths together."""
+    if sc.triangles.shape[0] < 2:
+        return 0
+    x = np.ascontiguousarray(positions, dtype=np.float64)
+    return int(np.unique(_crossing_pairs(x, sc.triangles, sc.cell)).size)
