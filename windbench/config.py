@@ -175,7 +175,10 @@ class ClothConfig:
     collision_margin: float = setting(0.005, "m", "cloth keeps this distance from bodies")
     friction: float = setting(0.3, "1", "Coulomb coefficient cloth/body")
     self_collision: bool = setting(
-        True, "", "cloth keeps its thickness from itself and from other cloths"
+        False,
+        "",
+        "cloth keeps its thickness from itself and from other cloths (off by default: "
+        "it costs more than the flag's frame budget; the paper scenes' flags rarely fold)",
     )
     thickness: float = setting(
         0.005, "m", "self-contact distance between a vertex and another triangle", gt=0

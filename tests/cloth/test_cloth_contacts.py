@@ -15,6 +15,7 @@ from windbench.cloth.model import ClothModel
 from windbench.cloth.self_contact import self_contact_model, self_intersections
 from windbench.cloth.solver import XPBDCloth
 from windbench.config import ClothConfig
+from windbench.errors import ConfigError
 from windbench.geometry.bodies import body_from_config, body_table
 
 DT = 1.0 / 60.0
@@ -140,6 +141,7 @@ def test_two_sheets_dropped_onto_each_other_do_not_interpenetrate():
     model = ClothModel.from_meshes([lower, upper])
     floor = body_from_config({"type": "plane", "point": [0, 0, 0], "normal": [0, 0, 1]}, "f")
     cfg = ClothConfig()
+    cfg.self_collision = True
     solver = XPBDCloth(model, (floor,), cfg)
     states = _frames(solver, model.initial_state(), 60)
     assert max(solver.stats(state)["self_intersections"] for state in states) == 0
@@ -148,3 +150,12 @@ def test_two_sheets_dropped_onto_each_other_do_not_interpenetrate():
     centre = np.linalg.norm(x[n_lower:, :2], axis=1) < 0.1
     below = np.linalg.norm(x[:n_lower, :2], axis=1) < 0.1
     assert x[n_lower:][centre, 2].min() > x[:n_lower][below, 2].max() + 0.5 * cfg.thickness
+
+
+@pytest.mark.parametrize(("key", "value"), [("thickness", 0.0), ("self_collision", "yes")])
+def test_a_bad_self_contact_key_is_named(key, value):
+    model = ClothModel.from_meshes([_sheet((0, 0, 0), 0.3, 3)])
+    cfg = ClothConfig()
+    setattr(cfg, key, value)
+    with pytest.raises(ConfigError, match=f"cloth.{key}"):
+        XPBDCloth.check(model, cfg)

@@ -16,7 +16,8 @@ barycentric weights and inverse masses (position-based edge contact):
 which moves q by exactly -C n to first order. A body thinner than a triangle is caught by
 TRIANGLE_SAMPLES interior points (barycentric beta) in the same way:
 dx_k = -C beta_k w_k n / sum_j beta_j^2 w_j. The end points themselves are the vertex
-contacts' business, so a minimum at an end of the edge is left alone.
+contacts' business, so a minimum at an end of the edge is left alone; so is a plane,
+whose phi is linear along an edge or triangle and deepest at a vertex.
 
 Skipping: phi changes by at most LIPSCHITZ per metre, so an edge whose end vertices are
 known (from their last vertex query, the contacts' clearances) to lie farther from the
@@ -29,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from windbench.cloth.collision import LIPSCHITZ
-from windbench.geometry.bodies import table_distance
+from windbench.geometry.bodies import PLANE, table_distance
 
 EDGE_SAMPLES = 5  # phi sampled at t = k / (EDGE_SAMPLES - 1) ...
 GOLDEN_STEPS = 16  # ... then this many golden-section steps in the best sample's bracket
@@ -156,7 +157,7 @@ def project_edge(contacts, inv_mass, p, corners, normal, beta):
     deepest = 0.0
     for b in range(boxes.shape[0]):
         _bounds(p, corners, lo, hi)
-        if not _box_overlaps(boxes[b], lo, hi):
+        if bodies.kinds[b] == PLANE or not _box_overlaps(boxes[b], lo, hi):
             continue
         t, d = edge_minimum(bodies, b, p[corners[0]], p[corners[1]], normal)
         d -= margin
@@ -176,7 +177,7 @@ def project_triangle(contacts, inv_mass, p, corners, normal):
     deepest = 0.0
     for b in range(boxes.shape[0]):
         _bounds(p, corners, lo, hi)
-        if not _box_overlaps(boxes[b], lo, hi):
+        if bodies.kinds[b] == PLANE or not _box_overlaps(boxes[b], lo, hi):
             continue
         for s in range(TRIANGLE_SAMPLES.shape[0]):
             beta = TRIANGLE_SAMPLES[s]
@@ -203,16 +204,39 @@ def _longest_side(p, corners):
     return np.sqrt(top)
 
 
+@njit(cache=True, inline="always")
+def _near_a_box(boxes, p, corners):
+    """Whether the box of the ``corners`` of ``p`` meets any grown body box (scalars: the
+    broad phase, run for every edge and triangle)."""
+    for b in range(boxes.shape[0]):
+        meets = True
+        for k in range(3):
+            lo, hi = np.inf, -np.inf
+            for i in corners:
+                lo, hi = min(lo, p[i, k]), max(hi, p[i, k])
+            if hi < boxes[b, k] or lo > boxes[b, k + 3]:
+                meets = False
+                break
+        if meets:
+            return True
+    return False
+
+
 @njit(cache=True)
 def surface_contacts(contacts, inv_mass, edges, triangles, p, clear):
     """Every edge, then every triangle, that may touch a body pushed out to the margin
     (:func:`project_edge`, :func:`project_triangle`); ``clear`` the vertex contacts'
     clearances (module docstring: skipping)."""
+    boxes = contacts.boxes
     normal, beta = np.empty(3), np.empty(2)
     for e in range(edges.shape[0]):
+        if not _near_a_box(boxes, p, edges[e]):
+            continue
         if not _clear_of_bodies(clear, p, edges[e], 0.5 * _longest_side(p, edges[e])):
             project_edge(contacts, inv_mass, p, edges[e], normal, beta)
     for f in range(triangles.shape[0]):
+        if not _near_a_box(boxes, p, triangles[f]):
+            continue
         if not _clear_of_bodies(clear, p, triangles[f], _longest_side(p, triangles[f])):
             project_triangle(contacts, inv_mass, p, triangles[f], normal)
 
@@ -224,6 +248,8 @@ def deepest_surface_penetration(bodies, boxes, positions, edges, triangles):
     normal, lo, hi = np.empty(3), np.empty(3), np.empty(3)
     deepest = 0.0
     for b in range(boxes.shape[0]):
+        if bodies.kinds[b] == PLANE:  # phi is linear: deepest at a vertex
+            continue
         for e in range(edges.shape[0]):
             _bounds(positions, edges[e], lo, hi)
             if _box_overlaps(boxes[b], lo, hi):

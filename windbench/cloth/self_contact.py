@@ -12,13 +12,14 @@ the triangle's plane then):
     dx_i = -C w_i s n / den,   dx_k = C beta_k w_k s n / den.
 
 A vertex that crosses a triangle within one substep is thus brought back while it lies
-within 2 x thickness of the triangle's box. Two edges that cross without a vertex near a
+within REACH x thickness of the triangle's plane. Two edges that cross without a vertex near a
 triangle (a sheet draped over another's border) are kept apart the same way at their
 closest points (:func:`push_edges`, n = e1 x e2).
 
 Broad phase: a spatial hash (:func:`build_hash`) of the triangles' boxes grown by
-2 x thickness on a lattice of cells ``cell`` wide (the mean rest edge length, at least
-2 x thickness), rebuilt every substep; a vertex reads the bucket of its own cell. Two
+REACH x thickness plus half the longest edge on a lattice of cells ``cell`` wide (the mean rest edge length, at
+least REACH x thickness), rebuilt every substep; a vertex reads the bucket of its own cell, an edge that of its
+midpoint. Two
 cells that share a bucket only add candidates, which the exact test rejects.
 
 The figure :func:`self_intersections` counts intersecting triangle pairs: two triangles
@@ -34,6 +35,7 @@ import numpy as np
 from numba import njit
 
 TABLE_PER_TRIANGLE = 2  # hash buckets per triangle
+REACH = 4.0  # a vertex this many thicknesses behind a triangle is brought back
 _P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner et al. 2003 hash primes
 
 
@@ -54,7 +56,7 @@ def self_contact_model(rest, triangles, on: bool, thickness: float) -> SelfConta
         mean_edge = float(sides.mean())
     else:
         mean_edge = 1.0
-    return SelfContact(bool(on), tri, float(thickness), max(mean_edge, 2.0 * thickness, 1e-6))
+    return SelfContact(bool(on), tri, float(thickness), max(mean_edge, REACH * thickness, 1e-6))
 
 
 @njit(cache=True, inline="always")
@@ -102,41 +104,53 @@ def build_hash(p, triangles, grow, cell):
 
 @njit(cache=True, inline="always")
 def _plane(p, tri):
-    """Unit normal (3,) of triangle ``tri`` at ``p`` and twice its area."""
-    e1 = p[tri[1]] - p[tri[0]]
-    e2 = p[tri[2]] - p[tri[0]]
-    n = np.cross(e1, e2)
-    area2 = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+    """(nx, ny, nz, 2 A): unit normal of triangle ``tri`` at ``p`` and twice its area."""
+    a, b, c = tri[0], tri[1], tri[2]
+    e1x, e1y, e1z = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+    e2x, e2y, e2z = p[c, 0] - p[a, 0], p[c, 1] - p[a, 1], p[c, 2] - p[a, 2]
+    nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    area2 = np.sqrt(nx * nx + ny * ny + nz * nz)
     if area2 > 0.0:
-        n /= area2
-    return n, area2
+        nx, ny, nz = nx / area2, ny / area2, nz / area2
+    return nx, ny, nz, area2
 
 
 @njit(cache=True, inline="always")
-def _barycentric(p, tri, x, n, area2):
-    """Barycentric coordinates (3,) of the projection of x on the plane of ``tri``."""
-    beta = np.empty(3)
+def _height(p, tri, i, nx, ny, nz):
+    """(x_i - x_tri[0]) . n."""
+    a = tri[0]
+    return (p[i, 0] - p[a, 0]) * nx + (p[i, 1] - p[a, 1]) * ny + (p[i, 2] - p[a, 2]) * nz
+
+
+@njit(cache=True, inline="always")
+def _barycentric(p, tri, i, nx, ny, nz, area2):
+    """Barycentric coordinates of the projection of vertex i on the plane of ``tri``:
+    beta_k = ((x_b - x_a) x (x_i - x_a)) . n / 2A over the edge a-b opposite corner k."""
+    out = np.empty(3)
     for k in range(3):
-        a, b = p[tri[(k + 1) % 3]], p[tri[(k + 2) % 3]]
-        beta[k] = np.dot(np.cross(b - a, x - a), n) / area2
-    return beta
+        a, b = tri[(k + 1) % 3], tri[(k + 2) % 3]
+        ux, uy, uz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+        wx, wy, wz = p[i, 0] - p[a, 0], p[i, 1] - p[a, 1], p[i, 2] - p[a, 2]
+        cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        out[k] = (cx * nx + cy * ny + cz * nz) / area2
+    return out
 
 
 @njit(cache=True)
 def push_vertex(p, xp, inv_mass, i, tri, thickness):
     """The vertex-triangle contact of vertex i and triangle ``tri`` (module docstring).
     Returns C (0 when they do not touch)."""
-    n, area2 = _plane(p, tri)
+    nx, ny, nz, area2 = _plane(p, tri)
     if area2 == 0.0:
         return 0.0
-    dist = np.dot(p[i] - p[tri[0]], n)
-    if abs(dist) >= 2.0 * thickness:
+    dist = _height(p, tri, i, nx, ny, nz)
+    if abs(dist) >= REACH * thickness:
         return 0.0
-    beta = _barycentric(p, tri, p[i], n, area2)
-    if beta.min() < 0.0:
+    beta = _barycentric(p, tri, i, nx, ny, nz, area2)
+    if beta[0] < 0.0 or beta[1] < 0.0 or beta[2] < 0.0:
         return 0.0
-    n0, a0 = _plane(xp, tri)
-    side = np.dot(xp[i] - xp[tri[0]], n0) if a0 > 0.0 else dist
+    mx, my, mz, a0 = _plane(xp, tri)
+    side = _height(xp, tri, i, mx, my, mz) if a0 > 0.0 else dist
     s = 1.0 if (side if side != 0.0 else dist) >= 0.0 else -1.0
     c = s * dist - thickness
     if c >= 0.0:
@@ -147,6 +161,7 @@ def push_vertex(p, xp, inv_mass, i, tri, thickness):
     if den <= 0.0:
         return 0.0
     g = -c * s / den
+    n = (nx, ny, nz)
     for a in range(3):
         p[i, a] += g * inv_mass[i] * n[a]
         for k in range(3):
@@ -155,20 +170,51 @@ def push_vertex(p, xp, inv_mass, i, tri, thickness):
 
 
 @njit(cache=True, inline="always")
-def _segment_parameters(p0, p1, q0, q1):
-    """(s, u) of the closest points p0 + s (p1 - p0), q0 + u (q1 - q0) of two segments
-    (clamped to [0, 1]; parallel segments: s = 0)."""
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a, e, f = np.dot(d1, d1), np.dot(d2, d2), np.dot(d2, r)
-    b, c = np.dot(d1, d2), np.dot(d1, r)
+def _apart(p, a, b, c, d, gap):
+    """Whether the boxes of the points {a, b} and {c, d} of ``p`` (d = c for a point) are
+    more than ``gap`` apart along an axis: the cheap rejection before an exact test."""
+    for k in range(3):
+        if max(p[a, k], p[b, k]) + gap < min(p[c, k], p[d, k]):
+            return True
+        if min(p[a, k], p[b, k]) - gap > max(p[c, k], p[d, k]):
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _outside_box(p, tri, i, gap):
+    """Whether vertex i lies outside the box of triangle ``tri`` grown by ``gap``."""
+    for k in range(3):
+        x = p[i, k]
+        if x + gap < min(p[tri[0], k], p[tri[1], k], p[tri[2], k]):
+            return True
+        if x - gap > max(p[tri[0], k], p[tri[1], k], p[tri[2], k]):
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _segment_parameters(p, i, j, k, l):
+    """(s, u, |gap|^2) of the closest points p_i + s (p_j - p_i), p_k + u (p_l - p_k) of two
+    edges (clamped to [0, 1]; parallel edges: s = 0), in scalars: it runs for every
+    candidate pair."""
+    d1x, d1y, d1z = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+    d2x, d2y, d2z = p[l, 0] - p[k, 0], p[l, 1] - p[k, 1], p[l, 2] - p[k, 2]
+    rx, ry, rz = p[i, 0] - p[k, 0], p[i, 1] - p[k, 1], p[i, 2] - p[k, 2]
+    a = d1x * d1x + d1y * d1y + d1z * d1z
+    e = d2x * d2x + d2y * d2y + d2z * d2z
+    b = d1x * d2x + d1y * d2y + d1z * d2z
+    c = d1x * rx + d1y * ry + d1z * rz
+    f = d2x * rx + d2y * ry + d2z * rz
     den = a * e - b * b
     s = min(1.0, max(0.0, (b * f - c * e) / den)) if den > 1e-12 * a * e else 0.0
     u = (b * s + f) / e if e > 0.0 else 0.0
     if u < 0.0:
-        u, s = 0.0, min(1.0, max(0.0, -c / a)) if a > 0.0 else 0.0
+        u, s = 0.0, (min(1.0, max(0.0, -c / a)) if a > 0.0 else 0.0)
     elif u > 1.0:
-        u, s = 1.0, min(1.0, max(0.0, (b - c) / a)) if a > 0.0 else 0.0
-    return s, u
+        u, s = 1.0, (min(1.0, max(0.0, (b - c) / a)) if a > 0.0 else 0.0)
+    gx, gy, gz = rx + s * d1x - u * d2x, ry + s * d1y - u * d2y, rz + s * d1z - u * d2z
+    return s, u, gx * gx + gy * gy + gz * gz
 
 
 @njit(cache=True)
@@ -177,9 +223,9 @@ def push_edges(p, xp, inv_mass, i, j, k, l, thickness):
     the edges) kept ``thickness`` apart along n = e1 x e2 on the side they lay on at the
     start of the substep: C = s (q1 - q2) . n - thickness, the four vertices moved with
     their barycentric weights and inverse masses. Returns C (0 when they do not touch)."""
-    s, u = _segment_parameters(p[i], p[j], p[k], p[l])
-    if s <= 0.0 or s >= 1.0 or u <= 0.0 or u >= 1.0:
-        return 0.0  # an end point: the vertex-triangle contacts' business
+    s, u, gap2 = _segment_parameters(p, i, j, k, l)
+    if s <= 0.0 or s >= 1.0 or u <= 0.0 or u >= 1.0 or gap2 >= thickness * thickness:
+        return 0.0  # apart, or nearest at an end point: the vertex-triangle contacts' business
     n = np.cross(p[j] - p[i], p[l] - p[k])
     norm = np.sqrt(np.dot(n, n))
     if norm == 0.0:
@@ -209,27 +255,41 @@ def push_edges(p, xp, inv_mass, i, j, k, l, thickness):
 
 @njit(cache=True)
 def _edge_contacts(sc, edges, inv_mass, p, xp, start, entries):
-    """Every edge against the edges of the triangles hashed near it (:func:`push_edges`)."""
+    """Every edge against the edges of the triangles hashed in the cell of its midpoint
+    (:func:`push_edges`; the hash grows the triangles' boxes by half the longest edge, so
+    that cell holds every triangle within the reach of any point of the edge)."""
     _, triangles, thickness, cell = sc
     size = start.shape[0] - 1
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
         if inv_mass[i] + inv_mass[j] == 0.0:
             continue
-        lo, hi = np.empty(3, np.int64), np.empty(3, np.int64)
+        k = _bucket(
+            np.int64(np.floor(0.5 * (p[i, 0] + p[j, 0]) / cell)),
+            np.int64(np.floor(0.5 * (p[i, 1] + p[j, 1]) / cell)),
+            np.int64(np.floor(0.5 * (p[i, 2] + p[j, 2]) / cell)),
+            size,
+        )
+        for m in range(start[k], start[k + 1]):
+            tri = triangles[entries[m]]
+            for t in range(3):
+                a, b = tri[t], tri[(t + 1) % 3]
+                if a == i or a == j or b == i or b == j or min(a, b) < min(i, j):
+                    continue  # each pair of edges from the edge with the lower id
+                if not _apart(p, i, j, a, b, thickness):
+                    push_edges(p, xp, inv_mass, i, j, a, b, thickness)
+
+
+@njit(cache=True)
+def _longest(p, edges):
+    """The length of the longest edge at ``p``."""
+    top = 0.0
+    for e in range(edges.shape[0]):
+        d2 = 0.0
         for a in range(3):
-            lo[a] = np.int64(np.floor((min(p[i, a], p[j, a]) - thickness) / cell))
-            hi[a] = np.int64(np.floor((max(p[i, a], p[j, a]) + thickness) / cell))
-        for ix in range(lo[0], hi[0] + 1):
-            for iy in range(lo[1], hi[1] + 1):
-                for iz in range(lo[2], hi[2] + 1):
-                    k = _bucket(ix, iy, iz, size)
-                    for m in range(start[k], start[k + 1]):
-                        tri = triangles[entries[m]]
-                        for t in range(3):
-                            a, b = tri[t], tri[(t + 1) % 3]
-                            if a != i and a != j and b != i and b != j:
-                                push_edges(p, xp, inv_mass, i, j, a, b, thickness)
+            d2 += (p[edges[e, 0], a] - p[edges[e, 1], a]) ** 2
+        top = max(top, d2)
+    return np.sqrt(top)
 
 
 @njit(cache=True)
@@ -239,7 +299,7 @@ def self_contacts(sc, edges, inv_mass, p, xp):
     _, triangles, thickness, cell = sc
     if triangles.shape[0] == 0:
         return
-    start, entries = build_hash(p, triangles, 2.0 * thickness, cell)
+    start, entries = build_hash(p, triangles, REACH * thickness + 0.5 * _longest(p, edges), cell)
     size = start.shape[0] - 1
     for i in range(p.shape[0]):
         k = _bucket(
@@ -253,6 +313,8 @@ def self_contacts(sc, edges, inv_mass, p, xp):
             if tri[0] == i or tri[1] == i or tri[2] == i:
                 continue
             if inv_mass[i] == 0.0 and inv_mass[tri[0]] + inv_mass[tri[1]] + inv_mass[tri[2]] == 0:
+                continue
+            if _outside_box(p, tri, i, REACH * thickness):
                 continue
             push_vertex(p, xp, inv_mass, i, tri, thickness)
     _edge_contacts(sc, edges, inv_mass, p, xp, start, entries)

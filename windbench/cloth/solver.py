@@ -48,7 +48,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, objmode
+from numba import njit
 
 from windbench.cloth.collision import body_boxes, contact_vertex, max_penetration
 from windbench.cloth.constraints import (
@@ -175,30 +175,22 @@ def _contacts(contacts, inv_mass, p, xp, normal, clear):
 
 
 @njit(cache=True)
-def _clock():
-    """Process CPU seconds (read from Python: the contacts' own phase)."""
-    with objmode(t="f8"):
-        t = time.process_time()
-    return t
-
-
-@njit(cache=True)
-def _all_contacts(model, p, xp, normal, clear, timer):
-    """Step 3: the cloth against itself and the other cloths
-    (:func:`~windbench.cloth.self_contact.self_contacts`, with ``cloth.self_collision``),
-    then its edges and triangles (:func:`~windbench.cloth.edge_contact.surface_contacts`)
-    and its vertices (:func:`_contacts`) against the bodies, so that the bodies have the
-    last word; the CPU seconds spent are added to ``timer[0]``."""
+def _all_contacts(model, p, xp, normal, clear):
+    """Step 3: the cloth's edges and triangles
+    (:func:`~windbench.cloth.edge_contact.surface_contacts`) and its vertices
+    (:func:`_contacts`) against the bodies, then the cloth against itself and the other
+    cloths (:func:`~windbench.cloth.self_contact.self_contacts`, with
+    ``cloth.self_collision``): a layer pressed onto a body by another is pushed back by
+    the body first, so that the self-contact then lifts the upper layer (which moves it
+    into the body's margin by at most the thickness, until the next contact pass)."""
     c = model.constraints
-    start = _clock()
-    if model.self_contact.on:
-        self_contacts(model.self_contact, c.edges, c.inv_mass, p, xp)
     if model.contacts.bodies.kinds.shape[0] > 0:
         surface_contacts(
             model.contacts, c.inv_mass, c.edges, model.self_contact.triangles, p, clear
         )
         _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
-    timer[0] += _clock() - start
+    if model.self_contact.on:
+        self_contacts(model.self_contact, c.edges, c.inv_mass, p, xp)
 
 
 @njit(cache=True)
@@ -227,7 +219,7 @@ def _strain_limit(model, frame, p, xp, work, normal):
     where the wind presses it on the body its largest stretch stays above the limit, by as
     much as ``max_stretch`` and ``over_strain_limit`` (:meth:`XPBDCloth.stretch`) record."""
     c, s = model.constraints, model.settings
-    _, lam, chain_work, moved, clear, stamps, _ = work
+    _, lam, chain_work, moved, clear, stamps = work
     stamps[1][:] = -1  # every edge is tested in the first pass
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     ptr = c.chain_ptr[: c.n_lattice_chains + 1]
@@ -290,7 +282,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     h = frame.dt / s.substeps
     inv_h = 1.0 / h
     p, vv = out
-    xp, lam, chain_work, _, clear, _, timer = work
+    xp, lam, chain_work, _, clear, _ = work
     xp[:] = x
     vv[:] = v
     normal = np.empty(3)
@@ -301,7 +293,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
         if (sub + 1) % frame.bend_every == 0:  # 2b. soft bending: every bend_every-th
             project_hinges(p, c.inv_mass, c.hinges, c.hinge_rest, frame.hinge_alpha)
         project_tethers(p, c.inv_mass, c.tether_anchor, c.tether_length)  # 2c.
-        _all_contacts(model, p, xp, normal, clear, timer)  # 3.
+        _all_contacts(model, p, xp, normal, clear)  # 3.
         _strain_limit(model, frame, p, xp, work, normal)  # 3b.
         for i in range(x.shape[0]):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
@@ -564,7 +556,6 @@ class Workspace:
     moved: np.ndarray  # (n,) bool: vertices the edge-by-edge strain limit moved
     clear: tuple  # contact clearances: probe (n, 3), clearance (n,)
     stamps: tuple  # the strain limit's clocks (limit_edges): per vertex, per edge, clock (1,)
-    timer: np.ndarray  # (1,) seconds spent in the contacts of the last frame
     frame: FrameConstants | None = None
 
 
@@ -626,7 +617,6 @@ class XPBDCloth:
                 np.full(n_e, -1, np.int64),
                 np.zeros(1, np.int64),
             ),
-            np.zeros(1),
         )
 
     def frame_constants(self, dt: float) -> FrameConstants:
@@ -643,15 +633,8 @@ class XPBDCloth:
         frame = self.frame_constants(float(dt))
         out = (np.empty_like(x), np.empty_like(v))
         w = self.workspace
-        w.timer[0] = 0.0
         work, energy, finite = xpbd_frame(
-            self.tables,
-            frame,
-            x,
-            v,
-            f,
-            out,
-            (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps, w.timer),
+            self.tables, frame, x, v, f, out, (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps)
         )
         frames = state.frames + 1
         if not finite:
@@ -665,6 +648,18 @@ class XPBDCloth:
                 f"done on it by gravity and wind ({work_in:.4g} J)",
             )
         return ClothState(out[0], out[1], frames, work_in)
+
+    def contact_seconds(self, positions: np.ndarray) -> float:
+        """The contacts' share of a frame (wall s, an estimate): one pass of step 3
+        (:func:`_all_contacts`) on a copy of ``positions``, timed, times the substeps. The
+        frame kernel carries no clock, so the figures call this apart from the step."""
+        if not (self.tables.self_contact.on or self.tables.contacts.bodies.kinds.shape[0]):
+            return 0.0
+        x = np.ascontiguousarray(positions, dtype=np.float64)
+        p, clear = x.copy(), tuple(a.copy() for a in self.workspace.clear)
+        start = time.perf_counter()
+        _all_contacts(self.tables, p, x, np.empty(3), clear)
+        return (time.perf_counter() - start) * self.settings.substeps
 
     def mobility(self) -> np.ndarray:
         """1 / (mass per area) of each vertex (m^2/kg): its lumped area over its mass, 0 for
@@ -710,5 +705,5 @@ class XPBDCloth:
             "max_stretch": top,
             "over_strain_limit": over,
             "self_intersections": self_intersections(sc, state.positions),
-            "contacts_seconds": float(self.workspace.timer[0]),
+            "contacts_seconds": self.contact_seconds(state.positions),
         }
