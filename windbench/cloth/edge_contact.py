@@ -17,7 +17,8 @@ which moves q by exactly -C n to first order. A body thinner than a triangle is 
 TRIANGLE_SAMPLES interior points (barycentric beta) in the same way:
 dx_k = -C beta_k w_k n / sum_j beta_j^2 w_j. The end points themselves are the vertex
 contacts' business, so a minimum at an end of the edge is left alone; so is a plane,
-whose phi is linear along an edge or triangle and deepest at a vertex.
+whose phi is linear along an edge or triangle and deepest at a vertex, and a mesh body
+(the character), thicker than a cloth edge everywhere and costly to search (a lattice).
 
 Skipping: phi changes by at most LIPSCHITZ per metre, so an edge whose end vertices are
 known (from their last vertex query, the contacts' clearances) to lie farther from the
@@ -30,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from windbench.cloth.collision import LIPSCHITZ
-from windbench.geometry.bodies import PLANE, table_distance
+from windbench.geometry.bodies import MESH, PLANE, table_distance
 
 EDGE_SAMPLES = 5  # phi sampled at t = k / (EDGE_SAMPLES - 1) ...
 GOLDEN_STEPS = 16  # ... then this many golden-section steps in the best sample's bracket
@@ -92,6 +93,12 @@ def edge_minimum(bodies, b, pa, pb, normal):
     if best < f:  # the best sample itself (an end point)
         t = best_k * step
     return t, _phi_on_edge(bodies, b, pa, pb, t, normal)
+
+
+@njit(cache=True, inline="always")
+def _thin(kind):
+    """Whether an edge may pass through a body of this kind (module docstring)."""
+    return kind != PLANE and kind != MESH
 
 
 @njit(cache=True, inline="always")
@@ -157,7 +164,7 @@ def project_edge(contacts, inv_mass, p, corners, normal, beta):
     deepest = 0.0
     for b in range(boxes.shape[0]):
         _bounds(p, corners, lo, hi)
-        if bodies.kinds[b] == PLANE or not _box_overlaps(boxes[b], lo, hi):
+        if not _thin(bodies.kinds[b]) or not _box_overlaps(boxes[b], lo, hi):
             continue
         t, d = edge_minimum(bodies, b, p[corners[0]], p[corners[1]], normal)
         d -= margin
@@ -177,7 +184,7 @@ def project_triangle(contacts, inv_mass, p, corners, normal):
     deepest = 0.0
     for b in range(boxes.shape[0]):
         _bounds(p, corners, lo, hi)
-        if bodies.kinds[b] == PLANE or not _box_overlaps(boxes[b], lo, hi):
+        if not _thin(bodies.kinds[b]) or not _box_overlaps(boxes[b], lo, hi):
             continue
         for s in range(TRIANGLE_SAMPLES.shape[0]):
             beta = TRIANGLE_SAMPLES[s]
@@ -230,11 +237,16 @@ def surface_contacts(contacts, inv_mass, edges, triangles, p, clear):
     boxes = contacts.boxes
     normal, beta = np.empty(3), np.empty(2)
     for e in range(edges.shape[0]):
+        if inv_mass[edges[e, 0]] + inv_mass[edges[e, 1]] == 0.0:
+            continue  # pinned: it cannot move
         if not _near_a_box(boxes, p, edges[e]):
             continue
         if not _clear_of_bodies(clear, p, edges[e], 0.5 * _longest_side(p, edges[e])):
             project_edge(contacts, inv_mass, p, edges[e], normal, beta)
     for f in range(triangles.shape[0]):
+        tri = triangles[f]
+        if inv_mass[tri[0]] + inv_mass[tri[1]] + inv_mass[tri[2]] == 0.0:
+            continue
         if not _near_a_box(boxes, p, triangles[f]):
             continue
         if not _clear_of_bodies(clear, p, triangles[f], _longest_side(p, triangles[f])):
@@ -248,7 +260,7 @@ def deepest_surface_penetration(bodies, boxes, positions, edges, triangles):
     normal, lo, hi = np.empty(3), np.empty(3), np.empty(3)
     deepest = 0.0
     for b in range(boxes.shape[0]):
-        if bodies.kinds[b] == PLANE:  # phi is linear: deepest at a vertex
+        if not _thin(bodies.kinds[b]):
             continue
         for e in range(edges.shape[0]):
             _bounds(positions, edges[e], lo, hi)

@@ -5,10 +5,8 @@ vertex positions and velocities and hand back per-vertex aerodynamic forces (§3
 stable cloth integrator serves them. We use extended position-based dynamics (Macklin,
 Mueller, Chentanez 2016) in the small-steps form (Macklin et al. 2019: many substeps, one
 constraint pass each): stiffness enters as a compliance alpha = 1/k, so it is stable at
-``sim.dt = 1/60 s`` for any stiffness (stiff cloth is the limit alpha -> 0), contacts
-are position projections inside each substep, and the kernels are plain loops over edges
-and hinges. With zero stiffness work the free fall is the exact symplectic-Euler
-parabola, which tends to 1/2 g t^2 as the substep shrinks.
+``sim.dt = 1/60 s`` for any stiffness (stiff cloth: alpha -> 0), contacts are position
+projections inside each substep. Free fall is the exact symplectic-Euler parabola.
 
 A frame of length dt (:func:`xpbd_frame`), with ``h = dt / cloth.substeps``, does per
 substep
@@ -17,8 +15,10 @@ substep
 2. the constraint projections of :mod:`windbench.cloth.constraints`: ``edge_iterations``
    passes over the stretch threads (the first also over the shear edges), the bending
    hinges, the tethers to the pins;
-3. contacts: every free vertex is moved out to ``cloth.collision_margin`` from the bodies
-   with Coulomb friction (:mod:`windbench.cloth.collision`); then up to
+3. contacts: edges and triangles (:mod:`~windbench.cloth.edge_contact`), then every free
+   vertex with Coulomb friction (:mod:`~windbench.cloth.collision`) moved out to
+   ``cloth.collision_margin`` from the bodies, and with ``cloth.self_collision`` the
+   cloths kept ``cloth.thickness`` apart (:mod:`~windbench.cloth.self_contact`); then up to
    ``cloth.limit_passes`` strain-limit passes (stretch edges at most ``1 + strain_limit``
    times their rest length: a lattice's threads as chains, each pass followed by the
    contacts; an irregular mesh's edges one by one, their contacts after the last pass);
