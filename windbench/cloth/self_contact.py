@@ -321,23 +321,25 @@ def self_contacts(sc, edges, inv_mass, p, xp):
 
 
 @njit(cache=True)
-def segment_crosses(x0, x1, v0, v1, v2):
-    """Whether the segment x0-x1 meets the triangle v0 v1 v2 (Moeller-Trumbore)."""
-    d = x1 - x0
-    e1, e2 = v1 - v0, v2 - v0
-    h = np.cross(d, e2)
-    det = np.dot(e1, h)
+def segment_crosses(p, i, j, a, b, c):
+    """Whether the segment x_i-x_j meets the triangle x_a x_b x_c (Moeller-Trumbore, in
+    scalars: it runs for every candidate pair)."""
+    dx, dy, dz = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+    e1x, e1y, e1z = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+    e2x, e2y, e2z = p[c, 0] - p[a, 0], p[c, 1] - p[a, 1], p[c, 2] - p[a, 2]
+    hx, hy, hz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
+    det = e1x * hx + e1y * hy + e1z * hz
     if abs(det) < 1e-300:
         return False
-    s = x0 - v0
-    u = np.dot(s, h) / det
+    sx, sy, sz = p[i, 0] - p[a, 0], p[i, 1] - p[a, 1], p[i, 2] - p[a, 2]
+    u = (sx * hx + sy * hy + sz * hz) / det
     if u < 0.0 or u > 1.0:
         return False
-    q = np.cross(s, e1)
-    v = np.dot(d, q) / det
+    qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
+    v = (dx * qx + dy * qy + dz * qz) / det
     if v < 0.0 or u + v > 1.0:
         return False
-    t = np.dot(e2, q) / det
+    t = (e2x * qx + e2y * qy + e2z * qz) / det
     return 0.0 <= t <= 1.0
 
 
@@ -353,11 +355,22 @@ def _share_vertex(a, b):
 @njit(cache=True)
 def triangles_cross(p, a, b):
     """Whether an edge of triangle ``a`` crosses triangle ``b`` or one of b's crosses a."""
-    for first, second in ((a, b), (b, a)):
-        v0, v1, v2 = p[second[0]], p[second[1]], p[second[2]]
-        for k in range(3):
-            if segment_crosses(p[first[k]], p[first[(k + 1) % 3]], v0, v1, v2):
-                return True
+    for k in range(3):
+        if segment_crosses(p, a[k], a[(k + 1) % 3], b[0], b[1], b[2]):
+            return True
+        if segment_crosses(p, b[k], b[(k + 1) % 3], a[0], a[1], a[2]):
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _boxes_apart(p, a, b):
+    """Whether the boxes of triangles ``a`` and ``b`` do not meet."""
+    for k in range(3):
+        if max(p[a[0], k], p[a[1], k], p[a[2], k]) < min(p[b[0], k], p[b[1], k], p[b[2], k]):
+            return True
+        if min(p[a[0], k], p[a[1], k], p[a[2], k]) > max(p[b[0], k], p[b[1], k], p[b[2], k]):
+            return True
     return False
 
 
@@ -377,6 +390,8 @@ def _crossing_pairs(p, triangles, cell):
                     for j in range(start[k], start[k + 1]):
                         g = entries[j]
                         if g <= f or _share_vertex(triangles[f], triangles[g]):
+                            continue
+                        if _boxes_apart(p, triangles[f], triangles[g]):
                             continue
                         if triangles_cross(p, triangles[f], triangles[g]):
                             found.append(f * m + g)
