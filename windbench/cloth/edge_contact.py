@@ -16,9 +16,10 @@ barycentric weights and inverse masses (position-based edge contact):
 which moves q by exactly -C n to first order. A body thinner than a triangle is caught by
 TRIANGLE_SAMPLES interior points (barycentric beta) in the same way:
 dx_k = -C beta_k w_k n / sum_j beta_j^2 w_j. The end points themselves are the vertex
-contacts' business, so a minimum at an end of the edge is left alone; so is a plane,
-whose phi is linear along an edge or triangle and deepest at a vertex, and a mesh body
-(the character), thicker than a cloth edge everywhere and costly to search (a lattice).
+contacts' business, so a minimum at an end of the edge is left alone. Only bodies thinner
+than twice the edge (a capsule's or cylinder's diameter, a box's shortest side) are
+searched: through a thicker one no edge passes without a vertex entering it first; a
+plane (phi linear along an edge) and a mesh body (the character) are left out.
 
 Skipping: phi changes by at most LIPSCHITZ per metre, so an edge whose end vertices are
 known (from their last vertex query, the contacts' clearances) to lie farther from the
@@ -31,7 +32,7 @@ import numpy as np
 from numba import njit
 
 from windbench.cloth.collision import LIPSCHITZ
-from windbench.geometry.bodies import MESH, PLANE, table_distance
+from windbench.geometry.bodies import BOX, CAPSULE, CYLINDER, table_distance
 
 EDGE_SAMPLES = 5  # phi sampled at t = k / (EDGE_SAMPLES - 1) ...
 GOLDEN_STEPS = 16  # ... then this many golden-section steps in the best sample's bracket
@@ -96,9 +97,16 @@ def edge_minimum(bodies, b, pa, pb, normal):
 
 
 @njit(cache=True, inline="always")
-def _thin(kind):
-    """Whether an edge may pass through a body of this kind (module docstring)."""
-    return kind != PLANE and kind != MESH
+def _thin(bodies, b, size):
+    """Whether body b is thinner than twice ``size`` (the longest side of an edge or
+    triangle): a capsule's or cylinder's diameter, a box's shortest side. Through a
+    thicker body no edge passes without a vertex inside it (module docstring)."""
+    kind, prm = bodies.kinds[b], bodies.params[b]
+    if kind == CAPSULE or kind == CYLINDER:
+        return 2.0 * prm[6] < 2.0 * size
+    if kind == BOX:
+        return min(prm[3] - prm[0], prm[4] - prm[1], prm[5] - prm[2]) < 2.0 * size
+    return False
 
 
 @njit(cache=True, inline="always")
@@ -164,7 +172,7 @@ def project_edge(contacts, inv_mass, p, corners, normal, beta):
     deepest = 0.0
     for b in range(boxes.shape[0]):
         _bounds(p, corners, lo, hi)
-        if not _thin(bodies.kinds[b]) or not _box_overlaps(boxes[b], lo, hi):
+        if not _thin(bodies, b, _longest_side(p, corners)) or not _box_overlaps(boxes[b], lo, hi):
             continue
         t, d = edge_minimum(bodies, b, p[corners[0]], p[corners[1]], normal)
         d -= margin
@@ -184,7 +192,7 @@ def project_triangle(contacts, inv_mass, p, corners, normal):
     deepest = 0.0
     for b in range(boxes.shape[0]):
         _bounds(p, corners, lo, hi)
-        if not _thin(bodies.kinds[b]) or not _box_overlaps(boxes[b], lo, hi):
+        if not _thin(bodies, b, _longest_side(p, corners)) or not _box_overlaps(boxes[b], lo, hi):
             continue
         for s in range(TRIANGLE_SAMPLES.shape[0]):
             beta = TRIANGLE_SAMPLES[s]
@@ -260,16 +268,17 @@ def deepest_surface_penetration(bodies, boxes, positions, edges, triangles):
     normal, lo, hi = np.empty(3), np.empty(3), np.empty(3)
     deepest = 0.0
     for b in range(boxes.shape[0]):
-        if not _thin(bodies.kinds[b]):
-            continue
         for e in range(edges.shape[0]):
             _bounds(positions, edges[e], lo, hi)
-            if _box_overlaps(boxes[b], lo, hi):
+            if _thin(bodies, b, _longest_side(positions, edges[e])) and _box_overlaps(
+                boxes[b], lo, hi
+            ):
                 pa, pb = positions[edges[e, 0]], positions[edges[e, 1]]
                 deepest = max(deepest, -edge_minimum(bodies, b, pa, pb, normal)[1])
         for f in range(triangles.shape[0]):
             _bounds(positions, triangles[f], lo, hi)
-            if not _box_overlaps(boxes[b], lo, hi):
+            thin = _thin(bodies, b, _longest_side(positions, triangles[f]))
+            if not thin or not _box_overlaps(boxes[b], lo, hi):
                 continue
             for s in range(TRIANGLE_SAMPLES.shape[0]):
                 q = np.zeros(3)
