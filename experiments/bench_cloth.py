@@ -5,7 +5,8 @@ body collisions: a 40 x 25 flag >= 300 frames/s, a 64 x 64 cloth >= 60, a 100 x 
 >= 30. Each case runs the real loop (``windbench.simulate.Simulation``, ``wind=global``,
 ``scene=flag`` with ``scene.cloths.0.resolution=[nu,nv]``) for a few warm-up frames
 (numba compiles, cached) and then ``--frames`` timed frames; the figures are the median
-and the best of the loop's own ``step_seconds`` phases (wind, aero, cloth, total).
+and the best of the loop's own ``step_seconds`` phases (wind, aero, cloth, total; the
+cloth's contacts, bodies and self-collision, as ``ms_contacts``, part of ``ms_cloth``).
 
     PYTHONPATH=$PWD python experiments/bench_cloth.py [--frames 120] [--substeps 16] [key=value ...]
 
@@ -128,6 +129,7 @@ def timed_frames(overrides: list[str], frames: int, warmup: int) -> dict:
     rows = sim.recorder.rows  # the cloth's figures over the timed frames: their largest
     worst = {k: max(rows[k][warmup:]) for k in ("max_stretch", "over_strain_limit")}
     stats = sim.cloth_solver.stats(sim.state)
+    contacts = sim.recorder.phases.get("contacts", [0.0] * (warmup + frames))[warmup:]
     return {
         "vertices": sim.state.positions.shape[0],
         "substeps": int(cfg.cloth.substeps),
@@ -135,6 +137,7 @@ def timed_frames(overrides: list[str], frames: int, warmup: int) -> dict:
         "ms_wind": 1e3 * med[0],
         "ms_aero": 1e3 * med[1],
         "ms_cloth": 1e3 * med[2],
+        "ms_contacts": 1e3 * float(np.median(contacts)),
         "ms_total_median": 1e3 * med[3],
         "ms_total_best": 1e3 * sec[:, 3].min(),
         "ms_loop_wall": 1e3 * wall,
@@ -145,6 +148,8 @@ def timed_frames(overrides: list[str], frames: int, warmup: int) -> dict:
         "max_stretch": worst["max_stretch"],
         "over_strain_limit": worst["over_strain_limit"],
         "max_penetration": stats["max_penetration"],
+        "self_collision": bool(cfg.cloth.self_collision),
+        "self_intersections": max(rows["self_intersections"][warmup:]),
     }
 
 
@@ -174,7 +179,7 @@ def main() -> None:
         print(
             f"{name:12s} {row['fps_median']:7.1f} frames/s wall, {row['fps_cpu']:7.1f} by CPU "
             f"time (target {target:g}); "
-            f"cloth {row['ms_cloth']:.2f} ms, aero {row['ms_aero']:.2f} ms, "
+            f"cloth {row['ms_cloth']:.2f} ms (contacts {row['ms_contacts']:.2f}), aero {row['ms_aero']:.2f} ms, "
             f"wind {row['ms_wind']:.2f} ms; max stretch {row['max_stretch']:.3f}"
         )
     write_rows(rows, args.out, OUT)

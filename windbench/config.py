@@ -174,6 +174,15 @@ class ClothConfig:
     gravity: float = setting(9.81, "m s-2", "gravity, along -z")
     collision_margin: float = setting(0.005, "m", "cloth keeps this distance from bodies")
     friction: float = setting(0.3, "1", "Coulomb coefficient cloth/body")
+    self_collision: bool = setting(
+        False,
+        "",
+        "cloth keeps its thickness from itself and from other cloths (off by default: "
+        "it costs more than the flag's frame budget; the paper scenes' flags rarely fold)",
+    )
+    thickness: float = setting(
+        0.005, "m", "self-contact distance between a vertex and another triangle", gt=0
+    )
     energy_limit: float = setting(
         10.0, "1", "diverged: kinetic energy > limit x work done on the cloth"
     )

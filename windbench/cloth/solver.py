@@ -5,10 +5,8 @@ vertex positions and velocities and hand back per-vertex aerodynamic forces (§3
 stable cloth integrator serves them. We use extended position-based dynamics (Macklin,
 Mueller, Chentanez 2016) in the small-steps form (Macklin et al. 2019: many substeps, one
 constraint pass each): stiffness enters as a compliance alpha = 1/k, so it is stable at
-``sim.dt = 1/60 s`` for any stiffness (stiff cloth is the limit alpha -> 0), contacts
-are position projections inside each substep, and the kernels are plain loops over edges
-and hinges. With zero stiffness work the free fall is the exact symplectic-Euler
-parabola, which tends to 1/2 g t^2 as the substep shrinks.
+``sim.dt = 1/60 s`` for any stiffness (stiff cloth: alpha -> 0), contacts are position
+projections inside each substep. Free fall is the exact symplectic-Euler parabola.
 
 A frame of length dt (:func:`xpbd_frame`), with ``h = dt / cloth.substeps``, does per
 substep
@@ -17,8 +15,10 @@ substep
 2. the constraint projections of :mod:`windbench.cloth.constraints`: ``edge_iterations``
    passes over the stretch threads (the first also over the shear edges), the bending
    hinges, the tethers to the pins;
-3. contacts: every free vertex is moved out to ``cloth.collision_margin`` from the bodies
-   with Coulomb friction (:mod:`windbench.cloth.collision`); then up to
+3. contacts: edges and triangles (:mod:`~windbench.cloth.edge_contact`), then every free
+   vertex with Coulomb friction (:mod:`~windbench.cloth.collision`) moved out to
+   ``cloth.collision_margin`` from the bodies, and with ``cloth.self_collision`` the
+   cloths kept ``cloth.thickness`` apart (:mod:`~windbench.cloth.self_contact`); then up to
    ``cloth.limit_passes`` strain-limit passes (stretch edges at most ``1 + strain_limit``
    times their rest length: a lattice's threads as chains, each pass followed by the
    contacts; an irregular mesh's edges one by one, their contacts after the last pass);
@@ -43,6 +43,7 @@ the accumulated positive work ``W = sum max(0, sum_i (f_i + m_i g) . dx_i)`` (pl
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -61,7 +62,14 @@ from windbench.cloth.constraints import (
     project_tethers,
     solve_chains,
 )
+from windbench.cloth.edge_contact import surface_contacts, surface_penetration
 from windbench.cloth.model import ClothModel, ClothState
+from windbench.cloth.self_contact import (
+    SelfContact,
+    self_contact_model,
+    self_contacts,
+    self_intersections,
+)
 from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
 from windbench.geometry.bodies import MOVING, BodyTable, body_table, set_track
@@ -117,6 +125,7 @@ class XPBDModel(NamedTuple):
     constraints: Constraints
     contacts: Contacts
     settings: Settings
+    self_contact: SelfContact
 
 
 class FrameConstants(NamedTuple):
@@ -172,6 +181,25 @@ def _contacts(contacts, inv_mass, p, xp, normal, clear):
     for i in range(p.shape[0]):
         if inv_mass[i] > 0.0:
             contact_vertex(contacts, i, xp[i], p[i], normal, clear)
+
+
+@njit(cache=True)
+def _all_contacts(model, p, xp, normal, clear):
+    """Step 3: the cloth's edges and triangles
+    (:func:`~windbench.cloth.edge_contact.surface_contacts`) and its vertices
+    (:func:`_contacts`) against the bodies, then the cloth against itself and the other
+    cloths (:func:`~windbench.cloth.self_contact.self_contacts`, with
+    ``cloth.self_collision``): a layer pressed onto a body by another is pushed back by
+    the body first, so that the self-contact then lifts the upper layer (which moves it
+    into the body's margin by at most the thickness, until the next contact pass)."""
+    c = model.constraints
+    if model.contacts.bodies.kinds.shape[0] > 0:
+        surface_contacts(
+            model.contacts, c.inv_mass, c.edges, model.self_contact.triangles, p, clear
+        )
+        _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
+    if model.self_contact.on:
+        self_contacts(model.self_contact, c.edges, c.inv_mass, p, xp)
 
 
 @njit(cache=True)
@@ -267,7 +295,6 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     xp[:] = x
     vv[:] = v
     normal = np.empty(3)
-    has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     moving = np.any(model.contacts.bodies.params[:, MOVING] != 0.0)
     for sub in range(s.substeps):
         if moving:  # the bodies' poses at the substep's end (collision.follow_track)
@@ -278,8 +305,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
         if (sub + 1) % frame.bend_every == 0:  # 2b. soft bending: every bend_every-th
             project_hinges(p, c.inv_mass, c.hinges, c.hinge_rest, frame.hinge_alpha)
         project_tethers(p, c.inv_mass, c.tether_anchor, c.tether_length)  # 2c.
-        if has_bodies:  # 3. contacts
-            _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
+        _all_contacts(model, p, xp, normal, clear)  # 3.
         _strain_limit(model, frame, p, xp, work, normal)  # 3b.
         for i in range(x.shape[0]):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
@@ -319,13 +345,18 @@ class SolverSettings:
     gravity: float
     margin: float
     friction: float
+    self_collision: bool
+    thickness: float
     energy_limit: float
 
     @classmethod
     def from_params(cls, params) -> SolverSettings:
         """Check every value; ConfigError naming the first bad key."""
-        if not isinstance(params.threads, bool):
-            raise ConfigError("cloth.threads", f"must be true or false, got {params.threads!r}")
+        for key in ("threads", "self_collision"):
+            if not isinstance(getattr(params, key), bool):
+                raise ConfigError(
+                    f"cloth.{key}", f"must be true or false, got {getattr(params, key)!r}"
+                )
         return cls(
             substeps=_count(params, "substeps"),
             edge_iterations=_count(params, "edge_iterations"),
@@ -335,6 +366,8 @@ class SolverSettings:
             gravity=_number(params.gravity, "cloth.gravity", False),
             margin=_number(params.collision_margin, "cloth.collision_margin", False),
             friction=_number(params.friction, "cloth.friction", False),
+            self_collision=params.self_collision,
+            thickness=_number(params.thickness, "cloth.thickness", True),
             energy_limit=_number(params.energy_limit, "cloth.energy_limit", True),
         )
 
@@ -543,7 +576,11 @@ class XPBDCloth:
 
     stats_units = {
         "kinetic_energy": ("kinetic energy of the cloth", "J"),
-        "max_penetration": ("deepest penetration of a cloth vertex into a body", "m"),
+        "max_penetration": (
+            "deepest penetration of a cloth vertex, edge or triangle into a body",
+            "m",
+        ),
+        "self_intersections": ("number of intersecting pairs of cloth triangles", "1"),
         "max_stretch": ("largest relative elongation of a stretch edge", "1"),
         "over_strain_limit": (
             "fraction of stretch edges beyond the strain limit, longer than "
@@ -577,6 +614,9 @@ class XPBDCloth:
                 s.friction,
             ),
             Settings(s.substeps, s.edge_iterations, s.strain_limit, s.limit_passes),
+            self_contact_model(
+                model.rest_positions, model.triangles, s.self_collision, s.thickness
+            ),
         )
         c = self.tables.constraints
         rest = np.ascontiguousarray(model.rest_positions, np.float64)
@@ -631,6 +671,18 @@ class XPBDCloth:
             )
         return ClothState(out[0], out[1], frames, work_in)
 
+    def contact_seconds(self, positions: np.ndarray) -> float:
+        """The contacts' share of a frame (wall s, an estimate): one pass of step 3
+        (:func:`_all_contacts`) on a copy of ``positions``, timed, times the substeps. The
+        frame kernel carries no clock, so the figures call this apart from the step."""
+        if not (self.tables.self_contact.on or self.tables.contacts.bodies.kinds.shape[0]):
+            return 0.0
+        x = np.ascontiguousarray(positions, dtype=np.float64)
+        p, clear = x.copy(), tuple(a.copy() for a in self.workspace.clear)
+        start = time.perf_counter()
+        _all_contacts(self.tables, p, x, np.empty(3), clear)
+        return (time.perf_counter() - start) * self.settings.substeps
+
     def mobility(self) -> np.ndarray:
         """1 / (mass per area) of each vertex (m^2/kg): its lumped area over its mass, 0 for
         a pinned vertex."""
@@ -659,13 +711,21 @@ class XPBDCloth:
         return self.stretch(positions)[0]
 
     def stats(self, state: ClothState) -> dict[str, float]:
-        """Figures recorded per step: kinetic energy (J), deepest body penetration (m),
-        largest stretch of a stretch edge and the fraction beyond the strain limit."""
+        """Figures recorded per step: kinetic energy (J), deepest body penetration of a
+        vertex, edge or triangle (m), largest stretch of a stretch edge and the fraction
+        beyond the strain limit, intersecting triangle pairs, and the CPU seconds of the
+        last step's contacts (a phase of ``step_seconds``)."""
         bodies, boxes, _, _ = self.tables.contacts
+        c, sc = self.tables.constraints, self.tables.self_contact
         top, over = self.stretch(state.positions)
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
-            "max_penetration": max_penetration(bodies, boxes, state.positions),
+            "max_penetration": max(
+                max_penetration(bodies, boxes, state.positions),
+                surface_penetration(bodies, boxes, state.positions, c.edges, sc.triangles),
+            ),
             "max_stretch": top,
             "over_strain_limit": over,
+            "self_intersections": self_intersections(sc, state.positions),
+            "contacts_seconds": self.contact_seconds(state.positions),
         }

@@ -1,0 +1,161 @@
+"""Cloth edges and triangles against bodies, self-collision and the intersection figure.
+
+Reference answers: the distance from a segment to a line (closed form), a pole's radius as
+the depth of an edge laid through its axis, two triangles known to cross or not, and the
+geometry of sheets falling onto a plane (a fold, a stack) that must not interpenetrate.
+"""
+
+import numpy as np
+import pytest
+
+from windbench.cloth.collision import max_penetration
+from windbench.cloth.edge_contact import edge_minimum, surface_penetration
+from windbench.cloth.mesh import flag_mesh
+from windbench.cloth.model import ClothModel
+from windbench.cloth.self_contact import self_contact_model, self_intersections
+from windbench.cloth.solver import XPBDCloth
+from windbench.config import ClothConfig
+from windbench.errors import ConfigError
+from windbench.geometry.bodies import body_from_config, body_table
+
+DT = 1.0 / 60.0
+POLE = {"type": "capsule", "a": [0.0, -1.0, 0.0], "b": [0.0, 1.0, 0.0], "radius": 0.01}
+
+
+def _sheet(origin, size, n, u=(1, 0, 0), v=(0, 1, 0), name="c"):
+    spec = {"origin": list(origin), "size": [size, size], "resolution": [n, n], "pin": "none"}
+    spec.update(u_axis=list(u), v_axis=list(v))
+    return flag_mesh(spec, name)
+
+
+def _frames(solver, state, frames, force=None):
+    """The states of ``frames`` frames under gravity (and a constant ``force`` per vertex)."""
+    f = (
+        np.zeros_like(state.positions)
+        if force is None
+        else np.tile(force, (state.positions.shape[0], 1))
+    )
+    out = []
+    for _ in range(frames):
+        state = solver.step(state, f, DT)
+        out.append(state)
+    return out
+
+
+def test_edge_minimum_finds_the_point_of_a_segment_nearest_to_a_pole():
+    """Segment (x, y0 + k x, z0) against the capsule on the y axis: the distance from the
+    point at x is sqrt(x^2 + z0^2) - r, smallest at x = 0 (t where the segment crosses x = 0)."""
+    body = body_from_config(POLE, "pole")
+    table = body_table((body,))
+    pa, pb = np.array([-0.13, 0.1, 0.02]), np.array([0.27, 0.3, 0.02])
+    t, phi = edge_minimum(table, 0, pa, pb, np.empty(3))
+    assert t == pytest.approx(0.13 / 0.4, abs=1e-4)
+    assert phi == pytest.approx(0.02 - 0.01, abs=1e-7)
+
+
+def test_penetration_figure_catches_an_edge_through_a_pole_that_vertices_miss():
+    """A square (2 x 2 vertices) laid across the pole's axis: every vertex lies 0.15 m and
+    more from the pole, but its edges and triangles pass through the axis: depth = radius."""
+    model = ClothModel.from_meshes([_sheet((-0.15, -0.17, 0.0), 0.3, 2)])
+    body = body_from_config(POLE, "pole")
+    solver = XPBDCloth(model, (body,), ClothConfig())
+    bodies, boxes, _, _ = solver.tables.contacts
+    x = model.rest_positions
+    assert max_penetration(bodies, boxes, x) == 0.0
+    edges = solver.tables.constraints.edges
+    tris = solver.tables.self_contact.triangles
+    assert surface_penetration(bodies, boxes, x, edges, tris) == pytest.approx(0.01, abs=1e-5)
+    assert solver.stats(model.initial_state())["max_penetration"] == pytest.approx(0.01, abs=1e-5)
+
+
+def test_an_edge_sliding_over_a_thin_pole_never_enters_it():
+    """A square of 2 x 2 vertices (its edges 0.3 m long) falls across a 0.01 m pole and is
+    pushed along x: it first rests on the pole at the margin (vertex contacts alone let it
+    fall straight through: 0.09 m lower by frame 8), then slides over it and falls off the
+    far side; no vertex ever comes near the pole, yet no edge or triangle ever enters it."""
+    model = ClothModel.from_meshes([_sheet((-0.15, -0.15, 0.05), 0.3, 2)])
+    body = body_from_config(POLE, "pole")
+    cfg = ClothConfig()
+    solver = XPBDCloth(model, (body,), cfg)
+    mass = solver.tables.constraints.mass[0]
+    states = _frames(solver, model.initial_state(), 60, force=(0.05 * 9.81 * mass, 0.0, 0.0))
+    for state in states:
+        assert solver.stats(state)["max_penetration"] == 0.0
+    for state in states[4:10]:  # resting across the pole, at its radius plus the margin
+        np.testing.assert_allclose(state.positions[:, 2], 0.01 + cfg.collision_margin, atol=0.01)
+    x = states[-1].positions
+    assert x[:, 0].min() > 0.0 and x[:, 2].max() < -0.5  # slid over it and fell off
+
+
+def test_intersection_counter_counts_a_known_crossing():
+    """Two triangles piercing each other: 1 pair; moved apart: 0; sharing a vertex: 0."""
+    x = np.array(
+        [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.2, 0.2, -0.5],
+            [0.2, 0.2, 0.5],
+            [0.8, 0.9, 0.0],
+        ]
+    )
+    crossing = self_contact_model(x, np.array([[0, 1, 2], [3, 4, 5]]), True, 0.01)
+    assert self_intersections(crossing, x) == 1
+    apart = x.copy()
+    apart[3:, 0] += 3.0
+    assert self_intersections(crossing, apart) == 0
+    fan = self_contact_model(x, np.array([[0, 1, 2], [0, 4, 3]]), True, 0.01)
+    assert self_intersections(fan, x) == 0  # adjacent (a common vertex): not counted
+
+
+def _fold_run(self_collision, frames=150):
+    """A 0.6 m square sheet standing on its edge, tilted, dropped onto the floor: it buckles
+    and folds over onto itself."""
+    mesh = _sheet((0.0, 0.0, 0.02), 0.6, 16, u=(1, 0, 0), v=(0, 0.3, 1.0))
+    model = ClothModel.from_meshes([mesh])
+    floor = body_from_config({"type": "plane", "point": [0, 0, 0], "normal": [0, 0, 1]}, "f")
+    cfg = ClothConfig()
+    cfg.self_collision = self_collision
+    solver = XPBDCloth(model, (floor,), cfg)
+    states = _frames(solver, model.initial_state(), frames)
+    return solver, model, [solver.stats(s)["self_intersections"] for s in states], states
+
+
+def test_a_sheet_folding_onto_itself_never_intersects():
+    solver, model, counts, states = _fold_run(True)
+    assert max(counts) == 0
+    z = states[-1].positions[:, 2]
+    assert z.max() < 0.15  # it did fold down onto the floor
+    _, _, counts_off, _ = _fold_run(False)
+    assert max(counts_off) > 0  # without self-collision the same fold passes through itself
+
+
+def test_two_sheets_dropped_onto_each_other_do_not_interpenetrate():
+    """Sheet A falls onto sheet B lying on the floor (turned 30 degrees against it, so no
+    vertex lines up): no triangle pair intersects, and A ends above B by the thickness."""
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    lower = _sheet((-0.25, -0.25, 0.01), 0.5, 12, name="b")
+    upper = _sheet(
+        (-0.2 * c + 0.2 * s, -0.2 * s - 0.2 * c, 0.2), 0.4, 10, u=(c, s, 0), v=(-s, c, 0)
+    )
+    model = ClothModel.from_meshes([lower, upper])
+    floor = body_from_config({"type": "plane", "point": [0, 0, 0], "normal": [0, 0, 1]}, "f")
+    cfg = ClothConfig()
+    cfg.self_collision = True
+    solver = XPBDCloth(model, (floor,), cfg)
+    states = _frames(solver, model.initial_state(), 60)
+    assert max(solver.stats(state)["self_intersections"] for state in states) == 0
+    x = states[-1].positions
+    n_lower = lower.n_vertices
+    centre = np.linalg.norm(x[n_lower:, :2], axis=1) < 0.1
+    below = np.linalg.norm(x[:n_lower, :2], axis=1) < 0.1
+    assert x[n_lower:][centre, 2].min() > x[:n_lower][below, 2].max() + 0.5 * cfg.thickness
+
+
+@pytest.mark.parametrize(("key", "value"), [("thickness", 0.0), ("self_collision", "yes")])
+def test_a_bad_self_contact_key_is_named(key, value):
+    model = ClothModel.from_meshes([_sheet((0, 0, 0), 0.3, 3)])
+    cfg = ClothConfig()
+    setattr(cfg, key, value)
+    with pytest.raises(ConfigError, match=f"cloth.{key}"):
+        XPBDCloth.check(model, cfg)
