@@ -21,6 +21,11 @@ than twice the edge (a capsule's or cylinder's diameter, a box's shortest side) 
 searched: through a thicker one no edge passes without a vertex entering it first; a
 plane (phi linear along an edge) and a mesh body (the character) are left out.
 
+Which bodies: :func:`surface_boxes` keeps the grown boxes of the bodies thin enough for
+an edge or triangle of the cloth stretched to STRETCH_SLACK times its longest rest side
+and empties the others, so a cloth near thick bodies only (the character's mesh, a wall)
+does no edge work at all and a flag does it only at its pole.
+
 Skipping: phi changes by at most LIPSCHITZ per metre, so an edge whose end vertices are
 known (from their last vertex query, the contacts' clearances) to lie farther from the
 bodies than the margin plus LIPSCHITZ times half the edge's length cannot touch them.
@@ -34,6 +39,8 @@ from numba import njit
 from windbench.cloth.collision import LIPSCHITZ
 from windbench.geometry.bodies import BOX, CAPSULE, CYLINDER, table_distance
 
+STRETCH_SLACK = 1.5  # an edge longer than this times the longest rest side has blown up
+EMPTY_BOX = (np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf)  # meets no point
 EDGE_SAMPLES = 5  # phi sampled at t = k / (EDGE_SAMPLES - 1) ...
 GOLDEN_STEPS = 16  # ... then this many golden-section steps in the best sample's bracket
 END_GAP = 1e-3  # a minimum at t < END_GAP or t > 1 - END_GAP is the end vertex's contact
@@ -296,3 +303,20 @@ def surface_penetration(bodies, boxes, positions, edges, triangles) -> float:
         return 0.0
     x = np.ascontiguousarray(positions, dtype=np.float64)
     return float(deepest_surface_penetration(bodies, boxes, x, edges, triangles))
+
+
+def surface_boxes(bodies, boxes, positions, triangles) -> np.ndarray:
+    """``boxes`` (m, 6) with the box of every body too thick for any edge or triangle of
+    the cloth (:func:`_thin` at STRETCH_SLACK times the longest side of a triangle at
+    ``positions``, the rest shape) replaced by EMPTY_BOX: the surface contacts' bodies."""
+    out = np.array(boxes, dtype=np.float64, copy=True)
+    if triangles.shape[0] == 0:
+        out[:] = EMPTY_BOX
+        return out
+    corners = positions[triangles]  # (T, 3, 3)
+    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+    reach = STRETCH_SLACK * float(sides.max())
+    for b in range(out.shape[0]):
+        if not _thin(bodies, b, reach):
+            out[b] = EMPTY_BOX
+    return out

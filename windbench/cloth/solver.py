@@ -62,7 +62,7 @@ from windbench.cloth.constraints import (
     project_tethers,
     solve_chains,
 )
-from windbench.cloth.edge_contact import surface_contacts, surface_penetration
+from windbench.cloth.edge_contact import surface_boxes, surface_contacts, surface_penetration
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.self_contact import (
     SelfContact,
@@ -76,6 +76,7 @@ from windbench.geometry.bodies import MOVING, BodyTable, body_table, set_track
 
 BEND_EVERY = 2  # soft hinges are projected every BEND_EVERY-th substep ...
 BEND_RESOLVED = 0.04  # ... when (omega BEND_EVERY h)^2 <= this for every hinge
+CONTACT_TIMING_EVERY = 10  # frames between two timings of the contact pass (a figure)
 MATERIAL_KEYS = ("density", "stretch_stiffness", "shear_stiffness", "bend_stiffness", "damping")
 _POSITIVE = {"density", "stretch_stiffness"}  # the others may be 0
 
@@ -126,6 +127,7 @@ class XPBDModel(NamedTuple):
     contacts: Contacts
     settings: Settings
     self_contact: SelfContact
+    surface: Contacts  # ``contacts`` with the boxes of the edge contacts' bodies alone
 
 
 class FrameConstants(NamedTuple):
@@ -194,9 +196,7 @@ def _all_contacts(model, p, xp, normal, clear):
     into the body's margin by at most the thickness, until the next contact pass)."""
     c = model.constraints
     if model.contacts.bodies.kinds.shape[0] > 0:
-        surface_contacts(
-            model.contacts, c.inv_mass, c.edges, model.self_contact.triangles, p, clear
-        )
+        surface_contacts(model.surface, c.inv_mass, c.edges, model.self_contact.triangles, p, clear)
         _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
     if model.self_contact.on:
         self_contacts(model.self_contact, c.edges, c.inv_mass, p, xp)
@@ -605,21 +605,27 @@ class XPBDCloth:
         self.stretch_edges = ~self.topology.edge_shear
         s = self.settings
         self.bodies = tuple(bodies)
+        contacts = Contacts(
+            body_table(self.bodies, track=s.substeps + 1),
+            body_boxes(self.bodies, s.margin),
+            s.margin,
+            s.friction,
+        )
+        rest = np.ascontiguousarray(model.rest_positions, np.float64)
+        triangles = np.asarray(model.triangles, dtype=np.int64)
         self.tables = XPBDModel(
             constraint_tables(model, self.topology, k, s),
-            Contacts(
-                body_table(self.bodies, track=s.substeps + 1),
-                body_boxes(self.bodies, s.margin),
-                s.margin,
-                s.friction,
-            ),
+            contacts,
             Settings(s.substeps, s.edge_iterations, s.strain_limit, s.limit_passes),
             self_contact_model(
                 model.rest_positions, model.triangles, s.self_collision, s.thickness
             ),
+            contacts._replace(
+                boxes=surface_boxes(contacts.bodies, contacts.boxes, rest, triangles)
+            ),
         )
         c = self.tables.constraints
-        rest = np.ascontiguousarray(model.rest_positions, np.float64)
+        self._contact_timing = (0, 0.0)  # (calls of contact_seconds, its last measurement)
         self.hinge_s = hinge_weights(rest, c.inv_mass, c.hinges)  # sum_q w_q |grad_q theta|^2
         n_e = self.topology.edges.shape[0]
         self.workspace = Workspace(
@@ -674,14 +680,22 @@ class XPBDCloth:
     def contact_seconds(self, positions: np.ndarray) -> float:
         """The contacts' share of a frame (wall s, an estimate): one pass of step 3
         (:func:`_all_contacts`) on a copy of ``positions``, timed, times the substeps. The
-        frame kernel carries no clock, so the figures call this apart from the step."""
+        frame kernel carries no clock, so the figures call this apart from the step; to
+        keep the estimate from costing a pass every frame it is re-measured every
+        CONTACT_TIMING_EVERY calls and held in between."""
         if not (self.tables.self_contact.on or self.tables.contacts.bodies.kinds.shape[0]):
             return 0.0
+        calls, held = self._contact_timing
+        self._contact_timing = (calls + 1, held)
+        if calls % CONTACT_TIMING_EVERY:
+            return held
         x = np.ascontiguousarray(positions, dtype=np.float64)
         p, clear = x.copy(), tuple(a.copy() for a in self.workspace.clear)
         start = time.perf_counter()
         _all_contacts(self.tables, p, x, np.empty(3), clear)
-        return (time.perf_counter() - start) * self.settings.substeps
+        held = (time.perf_counter() - start) * self.settings.substeps
+        self._contact_timing = (calls + 1, held)
+        return held
 
     def mobility(self) -> np.ndarray:
         """1 / (mass per area) of each vertex (m^2/kg): its lumped area over its mass, 0 for
@@ -716,13 +730,14 @@ class XPBDCloth:
         beyond the strain limit, intersecting triangle pairs, and the CPU seconds of the
         last step's contacts (a phase of ``step_seconds``)."""
         bodies, boxes, _, _ = self.tables.contacts
+        thin = self.tables.surface.boxes
         c, sc = self.tables.constraints, self.tables.self_contact
         top, over = self.stretch(state.positions)
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
             "max_penetration": max(
                 max_penetration(bodies, boxes, state.positions),
-                surface_penetration(bodies, boxes, state.positions, c.edges, sc.triangles),
+                surface_penetration(bodies, thin, state.positions, c.edges, sc.triangles),
             ),
             "max_stretch": top,
             "over_strain_limit": over,
