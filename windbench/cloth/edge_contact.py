@@ -170,6 +170,14 @@ def _push(p, inv_mass, corners, beta, depth, normal):
     return True
 
 
+@njit(cache=True, inline="always")
+def _may_touch(bodies, boxes, b, p, corners, lo, hi):
+    """Whether body b is thin for the edge or triangle ``corners`` and its grown box meets
+    theirs (``lo``, ``hi``: scratch, set to their bounds)."""
+    _bounds(p, corners, lo, hi)
+    return _thin(bodies, b, _longest_side(p, corners)) and _box_overlaps(boxes[b], lo, hi)
+
+
 @njit(cache=True)
 def project_edge(contacts, inv_mass, p, corners, normal, beta):
     """The edge contact of edge ``corners`` (2,) against every body it may touch (module
@@ -178,8 +186,7 @@ def project_edge(contacts, inv_mass, p, corners, normal, beta):
     lo, hi = np.empty(3), np.empty(3)
     deepest = 0.0
     for b in range(boxes.shape[0]):
-        _bounds(p, corners, lo, hi)
-        if not _thin(bodies, b, _longest_side(p, corners)) or not _box_overlaps(boxes[b], lo, hi):
+        if not _may_touch(bodies, boxes, b, p, corners, lo, hi):
             continue
         t, d = edge_minimum(bodies, b, p[corners[0]], p[corners[1]], normal)
         d -= margin
@@ -198,8 +205,7 @@ def project_triangle(contacts, inv_mass, p, corners, normal):
     lo, hi = np.empty(3), np.empty(3)
     deepest = 0.0
     for b in range(boxes.shape[0]):
-        _bounds(p, corners, lo, hi)
-        if not _thin(bodies, b, _longest_side(p, corners)) or not _box_overlaps(boxes[b], lo, hi):
+        if not _may_touch(bodies, boxes, b, p, corners, lo, hi):
             continue
         for s in range(TRIANGLE_SAMPLES.shape[0]):
             beta = TRIANGLE_SAMPLES[s]

@@ -391,11 +391,18 @@ def posed_distance(table, b, px, py, pz, normal):
     pose = table.params[b, POSE:PREVIOUS]
     qx, qy, qz = to_rest(pose, px, py, pz)
     d = rest_distance(table, b, qx, qy, qz, normal)
+    turn_forward(pose, normal)
+    return d
+
+
+@njit(cache=True, inline="always")
+def turn_forward(pose, normal):
+    """normal <- R normal (in place), R the pose's rotation (row-major in pose[:9]): a
+    direction of the body's rest frame turned into the world."""
     nx, ny, nz = normal[0], normal[1], normal[2]
     normal[0] = pose[0] * nx + pose[1] * ny + pose[2] * nz
     normal[1] = pose[3] * nx + pose[4] * ny + pose[5] * nz
     normal[2] = pose[6] * nx + pose[7] * ny + pose[8] * nz
-    return d
 
 
 @njit(cache=True)

@@ -55,6 +55,7 @@ from windbench.geometry.bodies import (
     set_poses,
     table_distance,
     to_rest,
+    turn_forward,
     union_distance_point,
 )
 from windbench.geometry.raster import segment_triangle
@@ -328,10 +329,7 @@ def _posed_first_hit(table, b, a, e, scratch, normal):
         pose[2] * ex + pose[5] * ey + pose[8] * ez,
     )
     s = _rest_first_hit(table, b, a0, e0, scratch, normal)
-    nx, ny, nz = normal[0], normal[1], normal[2]
-    normal[0] = pose[0] * nx + pose[1] * ny + pose[2] * nz
-    normal[1] = pose[3] * nx + pose[4] * ny + pose[5] * nz
-    normal[2] = pose[6] * nx + pose[7] * ny + pose[8] * nz
+    turn_forward(pose, normal)
     return s
 
 

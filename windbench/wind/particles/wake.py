@@ -188,6 +188,15 @@ def in_cavity(wakes, p, lower_z):
     return False
 
 
+@njit(cache=True, inline="always")
+def _cavity_point(row, p, lower_z):
+    """(s, z, n) of p in the wake's frame (:func:`_frame`) and where it lies in the
+    cavity, (xi, t) of :func:`_in_cavity` (xi < 0: outside)."""
+    s, z, n = _frame(row, p, lower_z)
+    xi, t = _in_cavity(row, s, z, n)
+    return s, z, n, xi, t
+
+
 @njit(cache=True)
 def leave_cavity(wakes, p, lower_z):
     """p mirrored out of the cavity it lies in across its nearest edge, the top (z <- 2 h(xi)
@@ -195,8 +204,7 @@ def leave_cavity(wakes, p, lower_z):
     particle along the wind, so the flux it carries is kept; p if it lies in none."""
     for k in range(wakes.shape[0]):
         row = wakes[k]
-        s, z, n = _frame(row, p, lower_z)
-        xi, t = _in_cavity(row, s, z, n)
+        s, z, n, xi, t = _cavity_point(row, p, lower_z)
         if xi < 0.0:
             continue
         up = row[TOP] * np.sqrt(1.0 - xi * xi) - z
@@ -214,8 +222,7 @@ def eddy_wind(wakes, p, lower_z):
     u, v, w = 0.0, 0.0, 0.0
     for k in range(wakes.shape[0]):
         row = wakes[k]
-        s, z, n = _frame(row, p, lower_z)
-        xi, t = _in_cavity(row, s, z, n)
+        s, z, n, xi, t = _cavity_point(row, p, lower_z)
         if xi < 0.0:
             continue
         amp = -row[BACKFLOW] * row[SPEED]
