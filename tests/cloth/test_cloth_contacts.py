@@ -64,7 +64,8 @@ def test_penetration_figure_catches_an_edge_through_a_pole_that_vertices_miss():
     assert max_penetration(bodies, boxes, x) == 0.0
     edges = solver.tables.constraints.edges
     tris = solver.tables.self_contact.triangles
-    assert surface_penetration(bodies, boxes, x, edges, tris) == pytest.approx(0.01, abs=1e-5)
+    w = solver.tables.constraints.inv_mass
+    assert surface_penetration(bodies, boxes, x, edges, tris, w) == pytest.approx(0.01, abs=1e-5)
     assert solver.stats(model.initial_state())["max_penetration"] == pytest.approx(0.01, abs=1e-5)
 
 

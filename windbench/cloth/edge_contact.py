@@ -21,6 +21,9 @@ than twice the edge (a capsule's or cylinder's diameter, a box's shortest side) 
 searched: through a thicker one no edge passes without a vertex entering it first; a
 plane (phi linear along an edge) and a mesh body (the character) are left out.
 
+Edges and triangles with a pinned corner are left alone: a pin attaches the cloth to a
+body (a flag's hem wraps its pole), so the cloth next to it may lie inside it.
+
 Which bodies: :func:`surface_boxes` keeps the grown boxes of the bodies thin enough for
 an edge or triangle of the cloth stretched to STRETCH_SLACK times its longest rest side
 and empties the others, so a cloth near thick bodies only (the character's mesh, a wall)
@@ -250,6 +253,16 @@ def _near_a_box(boxes, p, corners):
     return False
 
 
+@njit(cache=True, inline="always")
+def _attached(inv_mass, corners):
+    """Whether one of the ``corners`` is pinned: the cloth is attached to a body there (a
+    flag's hem around its pole), so the edge or triangle may lie in it as the scene put it."""
+    for i in corners:
+        if inv_mass[i] == 0.0:
+            return True
+    return False
+
+
 @njit(cache=True)
 def surface_contacts(contacts, inv_mass, edges, triangles, p, clear):
     """Every edge, then every triangle, that may touch a body pushed out to the margin
@@ -258,15 +271,15 @@ def surface_contacts(contacts, inv_mass, edges, triangles, p, clear):
     boxes = contacts.boxes
     normal, beta = np.empty(3), np.empty(2)
     for e in range(edges.shape[0]):
-        if inv_mass[edges[e, 0]] + inv_mass[edges[e, 1]] == 0.0:
-            continue  # pinned: it cannot move
+        if _attached(inv_mass, edges[e]):
+            continue
         if not _near_a_box(boxes, p, edges[e]):
             continue
         if not _clear_of_bodies(clear, p, edges[e], 0.5 * _longest_side(p, edges[e])):
             project_edge(contacts, inv_mass, p, edges[e], normal, beta)
     for f in range(triangles.shape[0]):
         tri = triangles[f]
-        if inv_mass[tri[0]] + inv_mass[tri[1]] + inv_mass[tri[2]] == 0.0:
+        if _attached(inv_mass, tri):
             continue
         if not _near_a_box(boxes, p, triangles[f]):
             continue
@@ -275,13 +288,16 @@ def surface_contacts(contacts, inv_mass, edges, triangles, p, clear):
 
 
 @njit(cache=True)
-def deepest_surface_penetration(bodies, boxes, positions, edges, triangles):
+def deepest_surface_penetration(bodies, boxes, positions, edges, triangles, inv_mass):
     """max(0, -phi) over the points of the edges (:func:`edge_minimum`) and the triangles'
-    TRIANGLE_SAMPLES: how deep the deepest edge or triangle point lies inside a body."""
+    TRIANGLE_SAMPLES: how deep the deepest edge or triangle point lies inside a body.
+    Edges and triangles with a pinned corner are left out, as in the contacts."""
     normal, lo, hi = np.empty(3), np.empty(3), np.empty(3)
     deepest = 0.0
     for b in range(boxes.shape[0]):
         for e in range(edges.shape[0]):
+            if _attached(inv_mass, edges[e]):
+                continue
             _bounds(positions, edges[e], lo, hi)
             if _thin(bodies, b, _longest_side(positions, edges[e])) and _box_overlaps(
                 boxes[b], lo, hi
@@ -289,6 +305,8 @@ def deepest_surface_penetration(bodies, boxes, positions, edges, triangles):
                 pa, pb = positions[edges[e, 0]], positions[edges[e, 1]]
                 deepest = max(deepest, -edge_minimum(bodies, b, pa, pb, normal)[1])
         for f in range(triangles.shape[0]):
+            if _attached(inv_mass, triangles[f]):
+                continue
             _bounds(positions, triangles[f], lo, hi)
             thin = _thin(bodies, b, _longest_side(positions, triangles[f]))
             if not thin or not _box_overlaps(boxes[b], lo, hi):
@@ -302,13 +320,13 @@ def deepest_surface_penetration(bodies, boxes, positions, edges, triangles):
     return deepest
 
 
-def surface_penetration(bodies, boxes, positions, edges, triangles) -> float:
+def surface_penetration(bodies, boxes, positions, edges, triangles, inv_mass) -> float:
     """Largest depth (m) of a point of a cloth edge or triangle inside a body of the table
     ``bodies`` (:func:`deepest_surface_penetration`); 0 with no bodies or no cloth."""
     if bodies.kinds.shape[0] == 0 or positions.shape[0] == 0:
         return 0.0
     x = np.ascontiguousarray(positions, dtype=np.float64)
-    return float(deepest_surface_penetration(bodies, boxes, x, edges, triangles))
+    return float(deepest_surface_penetration(bodies, boxes, x, edges, triangles, inv_mass))
 
 
 def surface_boxes(bodies, boxes, positions, triangles) -> np.ndarray:

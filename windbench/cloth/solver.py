@@ -737,7 +737,9 @@ class XPBDCloth:
             "kinetic_energy": self.kinetic_energy(state.velocities),
             "max_penetration": max(
                 max_penetration(bodies, boxes, state.positions),
-                surface_penetration(bodies, thin, state.positions, c.edges, sc.triangles),
+                surface_penetration(
+                    bodies, thin, state.positions, c.edges, sc.triangles, c.inv_mass
+                ),
             ),
             "max_stretch": top,
             "over_strain_limit": over,
