@@ -327,11 +327,26 @@ def _caption(anim: SceneAnimation, fmt: str) -> str:
 PAPER_ORDER = ("flag", "two_flags_wall", "shirt", "opposing_sources")  # Figs. 3, 4/5, 6, §4.2.2
 
 
-def section(records: Sequence[RunRecord], folder: Path, place, regenerate: str, progress: bool):
+def _animate_scene(piece: tuple) -> Animated | F.Missing:
+    """:func:`animate` of one ``(records, scene, folder)`` piece, in a worker process."""
+    records, scene, folder = piece
+    return animate(records, scene, folder, progress=False)
+
+
+def section(
+    records: Sequence[RunRecord],
+    folder: Path,
+    place,
+    regenerate: str,
+    progress: bool,
+    jobs: int | None = None,
+):
     """The report's animation section: one per scene among the runs (the validation problem
-    left out), or one note when no run kept frames. ``place`` turns a Missing into a note;
-    ``regenerate`` is the sentence that ends every caption."""
+    left out), or one note when no run kept frames; the scenes are drawn over ``jobs``
+    processes (default: the cores). ``place`` turns a Missing into a note; ``regenerate``
+    is the sentence that ends every caption."""
     from windbench.report.document import Section, Text, VideoRef
+    from windbench.report.parallel import pmap
     from windbench.report.validation import VALIDATION_SCENE
 
     scenes = {str(r.settings.get("scene")) for r in records if r.status == "complete"}
@@ -342,7 +357,8 @@ def section(records: Sequence[RunRecord], folder: Path, place, regenerate: str, 
         "(`output.frames`; no physics is re-run). MP4 (H.264) plays in the page; "
         "`report.md` links the files."
     )
-    results = [animate(records, scene, folder, progress) for scene in order]
+    pieces = [([r for r in records if r.settings.get("scene") == s], s, folder) for s in order]
+    results = pmap(_animate_scene, pieces, jobs, 1, "animations", progress)
     if results and all(isinstance(r, F.Missing) for r in results):
         note = F.Missing(
             "animations",

@@ -175,10 +175,12 @@ def build_report(
     export: Path | None = None,
     export_every: int = 1,
     progress: bool = True,
+    jobs: int | None = None,
 ) -> Report:
     """Read every run under ``inputs``, write the report folder, return what was done:
-    read and rank the runs, write the data files, draw and write the documents, export."""
-    records, refs = _read(inputs, reference, progress)
+    read and rank the runs, write the data files, draw and write the documents, export.
+    Reading and the animations use ``jobs`` processes (default: the cores available)."""
+    records, refs = _read(inputs, reference, progress, jobs)
     name = sweep_name(records, inputs)
     out = Path(out) if out else Path("reports") / name
     summary = _write_data(records, refs, out, name)
@@ -193,7 +195,7 @@ def build_report(
         _overview(report, inputs, reference),
         _comparison_section(records, complete, refs, place),
         _paper_section(records, place),
-        animation.section(records_ok, out / "figures", place, regenerate, progress),
+        animation.section(records_ok, out / "figures", place, regenerate, progress, jobs),
         _measured_section(complete, place),
         plate_section(*_aero_params(records), place),
         *([checks] if checks else []),
@@ -207,16 +209,14 @@ def build_report(
     return report
 
 
-def _read(inputs: Sequence, reference, progress: bool):
+def _read(inputs: Sequence, reference, progress: bool, jobs: int | None):
     """The runs (sorted, duplicates marked) and each scene's reference, lee errors set."""
-    records = read_runs(find_runs(inputs), progress=progress) + find_invalid(inputs)
+    records = read_runs(find_runs(inputs), progress, jobs) + find_invalid(inputs)
     records.sort(key=sort_key)
     if not records:
         raise FileNotFoundError(f"no windbench.nc under {[str(i) for i in inputs]}")
     mark_duplicates(records)
-    ref_records = (
-        read_runs(find_runs(_folders(reference)), progress=progress) if reference else None
-    )
+    ref_records = read_runs(find_runs(_folders(reference)), progress, jobs) if reference else None
     refs = choose_references(records, ref_records)
     assign_lee_errors([*records, *(ref_records or [])], refs)
     return records, refs

@@ -1,4 +1,4 @@
-"""``windbench-report DIR... [--out PATH] [--reference DIR...] [--export DIR]``.
+"""``windbench-report DIR... [--out PATH] [--reference DIR...] [--export DIR] [--jobs N]``.
 
 Exit status 0 when the report was written (skipped runs are listed, not fatal: a damaged
 dataset is listed as ``unreadable: checksum ...`` and never combined), 2 on bad arguments
@@ -39,6 +39,13 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--export-every", type=int, default=1, metavar="N", help="export every N-th cloth frame"
     )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        metavar="N",
+        help="processes for reading runs and drawing animations (default: the cores "
+        "available; the report is the same for any N)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -47,6 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     if args.export_every < 1:
         parser().error("--export-every: must be >= 1")
+    if args.jobs is not None and args.jobs < 1:
+        parser().error(f"--jobs: must be >= 1, got {args.jobs}")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -60,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
             export=args.export,
             export_every=args.export_every,
             progress=not args.quiet,
+            jobs=args.jobs,
         )
     except FileNotFoundError as err:
         print(f"windbench-report: error: {err}", file=sys.stderr)

@@ -448,14 +448,17 @@ def _wake(ds: xr.Dataset) -> pd.DataFrame | None:
     )
 
 
-def read_runs(paths: Sequence[Path], progress: bool = True) -> list[RunRecord]:
-    import sys
+READ_PER_WORKER = 20  # run files per reading process (one file reads in about 0.1 s)
 
-    from tqdm.auto import tqdm
 
-    quiet = not progress or len(paths) < 20 or not sys.stderr.isatty()
-    bar = tqdm(paths, desc="reading runs", unit="run", disable=quiet)
-    return sorted((read_run(p) for p in bar), key=sort_key)
+def read_runs(
+    paths: Sequence[Path], progress: bool = True, jobs: int | None = None
+) -> list[RunRecord]:
+    """:func:`read_run` of every path, sorted; over ``jobs`` processes (default: the cores)."""
+    from windbench.report.parallel import pmap
+
+    records = pmap(read_run, list(paths), jobs, READ_PER_WORKER, "reading runs", progress)
+    return sorted(records, key=sort_key)
 
 
 def sort_key(rec: RunRecord) -> tuple:

@@ -26,6 +26,7 @@ figures and animations show:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -134,9 +135,9 @@ class RunFrames:
     y: np.ndarray
     h: float
 
-    @property
+    @cached_property
     def pressure(self) -> np.ndarray:
-        """(k, m) |F| / A per triangle and frame."""
+        """(k, m) |F| / A per triangle and frame (computed once: every frame drawn reads it)."""
         return triangle_pressure(self.force, self.positions, self.triangles)
 
     @property

@@ -21,8 +21,8 @@ def test_taylor_green_decay_rate(record_property):
     """u ~ exp(-2 nu t) (k = 1 per axis); MacCormack within 5 % at 64 cells."""
     mc, _ = taylor_green(64, "maccormack", dt=0.02)
     sl, _ = taylor_green(64, "semi_lagrangian", dt=0.02)
-    record_property("taylor_green_maccormack_rel_error", mc["rate_rel_error"])
-    record_property("taylor_green_semi_lagrangian_rel_error", sl["rate_rel_error"])
+    record_property("taylor_green_maccormack_rel_error", float(mc["rate_rel_error"]))
+    record_property("taylor_green_semi_lagrangian_rel_error", float(sl["rate_rel_error"]))
     print(
         f"Taylor-Green 64 cells dt=0.02: MacCormack rate error {mc['rate_rel_error']:+.3%}, "
         f"semi-Lagrangian {sl['rate_rel_error']:+.3%}"

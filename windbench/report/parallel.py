@@ -1,0 +1,54 @@
+"""Independent pieces of a report (run files to read, animations to encode) spread over
+worker processes.
+
+Each piece is a pure function of its arguments (a file, a scene's runs), so the result is
+the same whatever the number of workers; ``map`` keeps the input order. Workers are
+started with ``spawn`` (a clean interpreter: no inherited matplotlib or thread state) and
+cost about 2 s of imports each, so small batches stay in this process: a caller says how
+many of its pieces make one worker worth starting.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+
+from tqdm.auto import tqdm
+
+from windbench.runtime import available_cores
+
+
+def worker_count(jobs: int | None, pieces: int, per_worker: int) -> int:
+    """Processes for ``pieces`` independent pieces: ``jobs`` (default: the cores this
+    process may use), at most one per ``per_worker`` pieces, at least one."""
+    if jobs is not None and jobs < 1:
+        raise ValueError(f"jobs must be >= 1, got {jobs}")
+    wanted = available_cores() if jobs is None else jobs
+    return max(1, min(wanted, pieces // per_worker))
+
+
+def pmap(
+    fn: Callable,
+    items: Sequence,
+    jobs: int | None,
+    per_worker: int,
+    desc: str = "",
+    progress: bool = False,
+) -> list:
+    """``[fn(x) for x in items]`` over :func:`worker_count` processes (``fn`` must be a
+    module-level function); a tqdm bar on a terminal when ``progress``."""
+    n = worker_count(jobs, len(items), per_worker)
+    bar = tqdm(total=len(items), desc=desc, disable=not (progress and sys.stderr.isatty()))
+    with bar:
+        if n == 1:
+            return [_tick(bar, fn(x)) for x in items]
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(n, mp_context=context) as pool:
+            return [_tick(bar, r) for r in pool.map(fn, items)]
+
+
+def _tick(bar, result):
+    bar.update()
+    return result
