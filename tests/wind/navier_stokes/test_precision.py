@@ -15,6 +15,7 @@ from windbench.wind import make_wind
 from windbench.wind.base import Obstacles
 
 
+@pytest.mark.slow  # a study (four Taylor-Green runs); the fence tests below cover float32
 def test_float32_keeps_the_taylor_green_and_poiseuille_errors():
     """The validation errors change by less than 1 % relative (32 cells here; the study's
     64 cells: experiments/results/bench_ns_precision.csv)."""
