@@ -56,14 +56,18 @@ def results_table(summary: pd.DataFrame, references: pd.DataFrame) -> str:
 
 
 def sweep_time(times: pd.DataFrame) -> str:
-    """One sentence: the comparison sweeps' total wall time, launcher and code (last rows)."""
+    """One sentence: the comparison sweeps' and the report's wall time, launcher and code
+    (last rows)."""
     last = times[times["sweep"].isin(SWEEPS)].drop_duplicates("sweep", keep="last")
     launchers = ", ".join(sorted(set(last["launcher"])))
     codes = ", ".join(sorted(set(last["code"])))
+    sweeps = last["wall_seconds"].sum()
+    report = float(times[times["sweep"] == "report"]["wall_seconds"].iloc[-1])
     return (
         f"The {len(last)} comparison sweeps ({int(last['runs'].sum())} runs) took "
-        f"{last['wall_seconds'].sum() / 60:.3g} min on 2 cores ({launchers}; concurrent load: "
-        f"{'; '.join(sorted(set(last['concurrent'])))}; code {codes}); the references are "
+        f"{sweeps / 60:.3g} min on 2 cores ({launchers}; concurrent load: "
+        f"{'; '.join(sorted(set(last['concurrent'])))}; code {codes}), the report "
+        f"{report:.0f} s more ({(sweeps + report) / 60:.3g} min in all); the references are "
         "separate runs, reused by every comparison "
         f"(`{TIMES.relative_to(ROOT)}`)."
     )
