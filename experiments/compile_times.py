@@ -3,12 +3,13 @@
     PYTHONPATH=. python experiments/compile_times.py [windbench overrides ...]
         [--top 25] [--out experiments/results/compile_times.csv]
 
-Runs ``windbench <overrides>`` (default: the smoke sweep of the README's first command) in
-this process with an empty numba cache (a temporary NUMBA_CACHE_DIR, set before numba is
-imported) and records numba's ``numba:compile`` events: per compiled function its own
-compile CPU seconds (process time: a callee compiled while its caller compiles is counted
-once, for the callee), the number of versions compiled and their argument types (two
-versions of one kernel are one compilation too many unless both are needed). Prints the
+Runs ``windbench <overrides>`` (default: the smoke sweep of the README's first command, on the
+basic launcher so that every compilation happens here) in this process with an empty numba
+cache (a temporary NUMBA_CACHE_DIR, set before numba is imported) and records numba's
+``numba:compile`` events: per compiled function its own compile CPU seconds (process time:
+a callee compiled while its caller compiles is counted once, for the callee), the number
+of versions compiled and their argument types (two versions of one kernel are one
+compilation too many unless both are needed). Prints the
 wall and CPU time, the total compile time, the share of the kernels and the slowest ones;
 writes one row per function. The machine's load average is printed beside it: compiling
 shares the cores with whatever else runs, which stretches the wall time, not the CPU time.
@@ -26,7 +27,7 @@ from collections import defaultdict
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parent / "results" / "compile_times.csv"
-README_FIRST = ["-m", "experiment=smoke"]
+README_FIRST = ["-m", "experiment=smoke", "hydra/launcher=basic"]  # one process: its events
 
 
 def compile_recorder():

@@ -39,3 +39,11 @@ def test_every_experiment_composes_with_a_sweep(experiment):
         )
     assert cfg.experiment == experiment
     assert OmegaConf.select(cfg, "hydra.sweeper.params"), "an experiment sets its sweep"
+
+
+@pytest.mark.parametrize("launcher", ["joblib", "basic", "submitit_local"])
+def test_the_smoke_sweep_takes_any_launcher(launcher):
+    """experiment=smoke picks joblib (one job per core) and sets none of its keys, so that
+    another launcher on the command line composes."""
+    cfg = compose_config(["experiment=smoke", f"hydra/launcher={launcher}"], hydra_node=True)
+    assert launcher.split("_")[0] in cfg.hydra.launcher._target_.lower()
