@@ -1,8 +1,10 @@
-"""Shared fixtures: compose configs and run them into tmp_path without a Hydra app."""
+"""Shared fixtures: compose configs and run them into tmp_path without a Hydra app; on an
+empty numba cache, one compilation of the kernels before the test processes start."""
 
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -11,6 +13,34 @@ from windbench.cli import compose_config
 from windbench.simulate import run
 
 ROOT = Path(__file__).resolve().parent.parent
+# The smoke sweep, two steps per backend: it calls every kernel of the cloth, the three
+# backends and the geometry that most tests use, the backends side by side (joblib)
+WARM_UP = ["-m", "experiment=smoke", "sim.spinup=0", "sim.duration=0.04", "output.snapshots=1"]
+
+
+def _cache_is_empty() -> bool:
+    """No compiled cloth frame in numba's cache (a fresh clone): the tell-tale of a cold run."""
+    where = Path(os.environ.get("NUMBA_CACHE_DIR") or ROOT / "windbench")
+    return not any(where.rglob("solver.xpbd_frame-*.nbi"))
+
+
+def pytest_configure(config):
+    """With several test processes (pytest-xdist) and an empty numba cache, compile the
+    kernels once here, before the processes start: each would otherwise compile the same
+    kernels at the same time (the cache is shared only once a kernel is written)."""
+    if hasattr(config, "workerinput") or (config.getoption("numprocesses", 0) or 0) < 2:
+        return
+    if not _cache_is_empty():
+        return
+    print("windbench: empty numba cache: compiling the kernels once (about 90 s on 2 cores)")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    with tempfile.TemporaryDirectory() as tmp:
+        done = subprocess.run(
+            [sys.executable, "-m", "windbench", *WARM_UP, f"hydra.sweep.dir={tmp}/sweep"],
+            cwd=tmp, env=env, capture_output=True, text=True,
+        )  # fmt: skip
+    if done.returncode != 0:  # the tests that use these kernels will say what is wrong
+        print(f"windbench: the compile run failed ({done.returncode}): {done.stderr[-500:]}")
 
 
 @pytest.fixture
