@@ -126,7 +126,7 @@ def test_without_frames_the_report_says_how_to_get_animations(tmp_path):
         notes.append(missing)
         return missing
 
-    sec = animation.section(records, tmp_path / "fig", place, "", progress=False)
+    sec = animation.section(animation.start(records, tmp_path / "fig"), place, "", progress=False)
     assert [n.name for n in notes] == ["animations"] and "output.frames" in notes[0].needs
     assert len(sec.blocks) == 2 and not (tmp_path / "fig").exists()
 

@@ -333,32 +333,40 @@ def _animate_scene(piece: tuple) -> Animated | F.Missing:
     return animate(records, scene, folder, progress=False)
 
 
-def section(
-    records: Sequence[RunRecord],
-    folder: Path,
-    place,
-    regenerate: str,
-    progress: bool,
-    jobs: int | None = None,
-):
-    """The report's animation section: one per scene among the runs (the validation problem
-    left out), or one note when no run kept frames; the scenes are drawn over ``jobs``
-    processes (default: the cores). ``place`` turns a Missing into a note; ``regenerate``
-    is the sentence that ends every caption."""
-    from windbench.report.document import Section, Text, VideoRef
-    from windbench.report.parallel import pmap
+def _scene_order(records: Sequence[RunRecord]) -> list[str]:
+    """The scenes among the complete runs, the paper's first (the validation problem left
+    out)."""
     from windbench.report.validation import VALIDATION_SCENE
 
     scenes = {str(r.settings.get("scene")) for r in records if r.status == "complete"}
     scenes.discard(VALIDATION_SCENE)
-    order = sorted(scenes, key=lambda s: (PAPER_ORDER.index(s) if s in PAPER_ORDER else 9, s))
+    return sorted(scenes, key=lambda s: (PAPER_ORDER.index(s) if s in PAPER_ORDER else 9, s))
+
+
+def start(records: Sequence[RunRecord], folder: Path, jobs: int | None = None):
+    """Start drawing one animation per scene over ``jobs`` processes (default: the cores);
+    :func:`section` collects them, so that the report draws its other figures meanwhile."""
+    from windbench.report.parallel import Batch
+
+    pieces = [
+        ([r for r in records if r.settings.get("scene") == s], s, folder)
+        for s in _scene_order(records)
+    ]
+    return Batch(_animate_scene, pieces, jobs, 1)
+
+
+def section(animations, place, regenerate: str, progress: bool):
+    """The report's animation section from the :func:`start` ed ``animations``: one per
+    scene, or one note when no run kept frames. ``place`` turns a Missing into a note;
+    ``regenerate`` is the sentence that ends every caption."""
+    from windbench.report.document import Section, Text, VideoRef
+
     intro = Text(
         "Each scene in motion, the backends side by side, from the frames the runs kept "
         "(`output.frames`; no physics is re-run). MP4 (H.264) plays in the page; "
         "`report.md` links the files."
     )
-    pieces = [([r for r in records if r.settings.get("scene") == s], s, folder) for s in order]
-    results = pmap(_animate_scene, pieces, jobs, 1, "animations", progress)
+    results = animations.results("animations", progress)
     if results and all(isinstance(r, F.Missing) for r in results):
         note = F.Missing(
             "animations",

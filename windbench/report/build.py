@@ -190,17 +190,20 @@ def build_report(
     place = _placer(report, out / "figures", regenerate)
     complete = summary[summary["status"] == "complete"].copy()
     records_ok = [r for r in records if r.status == "complete"]
-    checks = validation.section(records_ok, inputs, place)
-    sections = [
+    animations = animation.start(records_ok, out / "figures", jobs)  # drawn meanwhile
+    before = [
         _overview(report, inputs, reference),
         _comparison_section(records, complete, refs, place),
         _paper_section(records, place),
-        animation.section(records_ok, out / "figures", place, regenerate, progress, jobs),
+    ]
+    checks = validation.section(records_ok, inputs, place)
+    after = [
         _measured_section(complete, place),
         plate_section(*_aero_params(records), place),
         *([checks] if checks else []),
         _runs_section(report, swept_keys(records)),
     ]
+    sections = [*before, animation.section(animations, place, regenerate, progress), *after]
     title = f"windbench report: {name}"
     (out / "report.md").write_text(to_markdown(title, sections), encoding="utf-8")
     (out / "index.html").write_text(to_html(title, sections, out / "figures"), encoding="utf-8")

@@ -29,6 +29,32 @@ def worker_count(jobs: int | None, pieces: int, per_worker: int) -> int:
     return max(1, min(wanted, pieces // per_worker))
 
 
+class Batch:
+    """``fn`` over ``items`` started in :func:`worker_count` processes at once, collected by
+    :meth:`results`, so that this process can do other work meanwhile (with one process
+    the work is done in :meth:`results`)."""
+
+    def __init__(self, fn: Callable, items: Sequence, jobs: int | None, per_worker: int):
+        self.fn, self.items = fn, list(items)
+        n = worker_count(jobs, len(self.items), per_worker)
+        self.pool = None
+        if n > 1:
+            context = multiprocessing.get_context("spawn")
+            self.pool = ProcessPoolExecutor(n, mp_context=context)
+            self.futures = [self.pool.submit(fn, x) for x in self.items]
+
+    def results(self, desc: str = "", progress: bool = False) -> list:
+        """``[fn(x) for x in items]`` in order; a tqdm bar on a terminal when ``progress``."""
+        bar = tqdm(total=len(self.items), desc=desc, disable=not (progress and sys.stderr.isatty()))
+        with bar:
+            if self.pool is None:
+                return [_tick(bar, self.fn(x)) for x in self.items]
+            try:
+                return [_tick(bar, f.result()) for f in self.futures]
+            finally:
+                self.pool.shutdown(cancel_futures=True)
+
+
 def pmap(
     fn: Callable,
     items: Sequence,
@@ -39,14 +65,7 @@ def pmap(
 ) -> list:
     """``[fn(x) for x in items]`` over :func:`worker_count` processes (``fn`` must be a
     module-level function); a tqdm bar on a terminal when ``progress``."""
-    n = worker_count(jobs, len(items), per_worker)
-    bar = tqdm(total=len(items), desc=desc, disable=not (progress and sys.stderr.isatty()))
-    with bar:
-        if n == 1:
-            return [_tick(bar, fn(x)) for x in items]
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(n, mp_context=context) as pool:
-            return [_tick(bar, r) for r in pool.map(fn, items)]
+    return Batch(fn, items, jobs, per_worker).results(desc, progress)
 
 
 def _tick(bar, result):
