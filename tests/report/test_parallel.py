@@ -18,3 +18,15 @@ def test_worker_count_limits():
     assert worker_count(1, pieces=100, per_worker=1) == 1
     with pytest.raises(ValueError, match="jobs must be >= 1"):
         worker_count(0, pieces=3, per_worker=1)
+
+
+def test_a_batch_closes_twice_and_the_cli_refuses_zero_jobs(tmp_path, capsys):
+    from windbench.report.cli import main
+    from windbench.report.parallel import Batch
+
+    batch = Batch(operator.neg, [1, 2, 3, 4], jobs=2, per_worker=1)
+    assert batch.results() == [-1, -2, -3, -4]
+    batch.close()  # after results(): nothing left to stop
+    with pytest.raises(SystemExit) as exit_:
+        main([str(tmp_path), "--jobs", "0"])
+    assert exit_.value.code == 2 and "--jobs: must be >= 1" in capsys.readouterr().err

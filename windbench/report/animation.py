@@ -343,9 +343,9 @@ def _scene_order(records: Sequence[RunRecord]) -> list[str]:
     return sorted(scenes, key=lambda s: (PAPER_ORDER.index(s) if s in PAPER_ORDER else 9, s))
 
 
-def start(records: Sequence[RunRecord], folder: Path, jobs: int | None = None):
-    """Start drawing one animation per scene over ``jobs`` processes (default: the cores);
-    :func:`section` collects them, so that the report draws its other figures meanwhile."""
+def start(records: Sequence[RunRecord], folder: Path, jobs: int = 1):
+    """Start drawing one animation per scene over up to ``jobs`` processes; :func:`section`
+    collects them, so that the report draws its other figures meanwhile."""
     from windbench.report.parallel import Batch
 
     pieces = [

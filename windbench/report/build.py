@@ -175,11 +175,11 @@ def build_report(
     export: Path | None = None,
     export_every: int = 1,
     progress: bool = True,
-    jobs: int | None = None,
+    jobs: int = 1,
 ) -> Report:
     """Read every run under ``inputs``, write the report folder, return what was done:
     read and rank the runs, write the data files, draw and write the documents, export.
-    Reading and the animations use ``jobs`` processes (default: the cores available)."""
+    Reading and the animations use up to ``jobs`` processes (windbench-report: the cores)."""
     records, refs = _read(inputs, reference, progress, jobs)
     name = sweep_name(records, inputs)
     out = Path(out) if out else Path("reports") / name
@@ -191,19 +191,23 @@ def build_report(
     complete = summary[summary["status"] == "complete"].copy()
     records_ok = [r for r in records if r.status == "complete"]
     animations = animation.start(records_ok, out / "figures", jobs)  # drawn meanwhile
-    before = [
-        _overview(report, inputs, reference),
-        _comparison_section(records, complete, refs, place),
-        _paper_section(records, place),
-    ]
-    checks = validation.section(records_ok, inputs, place)
-    after = [
-        _measured_section(complete, place),
-        plate_section(*_aero_params(records), place),
-        *([checks] if checks else []),
-        _runs_section(report, swept_keys(records)),
-    ]
-    sections = [*before, animation.section(animations, place, regenerate, progress), *after]
+    try:
+        before = [
+            _overview(report, inputs, reference),
+            _comparison_section(records, complete, refs, place),
+            _paper_section(records, place),
+        ]
+        checks = validation.section(records_ok, inputs, place)
+        after = [
+            _measured_section(complete, place),
+            plate_section(*_aero_params(records), place),
+            *([checks] if checks else []),
+            _runs_section(report, swept_keys(records)),
+        ]
+        anim = animation.section(animations, place, regenerate, progress)
+    finally:
+        animations.close()  # a figure that failed stops the animations too
+    sections = [*before, anim, *after]
     title = f"windbench report: {name}"
     (out / "report.md").write_text(to_markdown(title, sections), encoding="utf-8")
     (out / "index.html").write_text(to_html(title, sections, out / "figures"), encoding="utf-8")
@@ -212,7 +216,7 @@ def build_report(
     return report
 
 
-def _read(inputs: Sequence, reference, progress: bool, jobs: int | None):
+def _read(inputs: Sequence, reference, progress: bool, jobs: int):
     """The runs (sorted, duplicates marked) and each scene's reference, lee errors set."""
     records = read_runs(find_runs(inputs), progress, jobs) + find_invalid(inputs)
     records.sort(key=sort_key)

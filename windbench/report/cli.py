@@ -60,6 +60,7 @@ def main(argv: list[str] | None = None) -> int:
 
     matplotlib.use("Agg")
     from windbench.report.build import build_report
+    from windbench.report.parallel import default_jobs
 
     try:
         report = build_report(
@@ -69,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
             export=args.export,
             export_every=args.export_every,
             progress=not args.quiet,
-            jobs=args.jobs,
+            jobs=args.jobs or default_jobs(),
         )
     except FileNotFoundError as err:
         print(f"windbench-report: error: {err}", file=sys.stderr)

@@ -451,10 +451,8 @@ def _wake(ds: xr.Dataset) -> pd.DataFrame | None:
 READ_PER_WORKER = 20  # run files per reading process (one file reads in about 0.1 s)
 
 
-def read_runs(
-    paths: Sequence[Path], progress: bool = True, jobs: int | None = None
-) -> list[RunRecord]:
-    """:func:`read_run` of every path, sorted; over ``jobs`` processes (default: the cores)."""
+def read_runs(paths: Sequence[Path], progress: bool = True, jobs: int = 1) -> list[RunRecord]:
+    """:func:`read_run` of every path, sorted; over up to ``jobs`` processes."""
     from windbench.report.parallel import pmap
 
     records = pmap(read_run, list(paths), jobs, READ_PER_WORKER, "reading runs", progress)

@@ -5,7 +5,9 @@ Each piece is a pure function of its arguments (a file, a scene's runs), so the 
 the same whatever the number of workers; ``map`` keeps the input order. Workers are
 started with ``spawn`` (a clean interpreter: no inherited matplotlib or thread state) and
 cost about 2 s of imports each, so small batches stay in this process: a caller says how
-many of its pieces make one worker worth starting.
+many of its pieces make one worker worth starting. Functions of the library default to one
+process (a script calling them needs no ``if __name__ == "__main__"`` guard, which
+``spawn`` requires); ``windbench-report`` asks for the cores.
 """
 
 from __future__ import annotations
@@ -20,13 +22,17 @@ from tqdm.auto import tqdm
 from windbench.runtime import available_cores
 
 
-def worker_count(jobs: int | None, pieces: int, per_worker: int) -> int:
-    """Processes for ``pieces`` independent pieces: ``jobs`` (default: the cores this
-    process may use), at most one per ``per_worker`` pieces, at least one."""
-    if jobs is not None and jobs < 1:
+def worker_count(jobs: int, pieces: int, per_worker: int) -> int:
+    """Processes for ``pieces`` independent pieces: ``jobs`` at most, and at most one per
+    ``per_worker`` pieces, at least one."""
+    if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
-    wanted = available_cores() if jobs is None else jobs
-    return max(1, min(wanted, pieces // per_worker))
+    return max(1, min(jobs, pieces // per_worker))
+
+
+def default_jobs() -> int:
+    """What ``windbench-report`` uses without ``--jobs``: the cores this process may use."""
+    return available_cores()
 
 
 class Batch:
@@ -34,7 +40,7 @@ class Batch:
     :meth:`results`, so that this process can do other work meanwhile (with one process
     the work is done in :meth:`results`)."""
 
-    def __init__(self, fn: Callable, items: Sequence, jobs: int | None, per_worker: int):
+    def __init__(self, fn: Callable, items: Sequence, jobs: int, per_worker: int):
         self.fn, self.items = fn, list(items)
         n = worker_count(jobs, len(self.items), per_worker)
         self.pool = None
@@ -52,13 +58,18 @@ class Batch:
             try:
                 return [_tick(bar, f.result()) for f in self.futures]
             finally:
-                self.pool.shutdown(cancel_futures=True)
+                self.close()
+
+    def close(self) -> None:
+        """Stop the workers (what has not started is cancelled); safe to call again."""
+        if self.pool is not None:
+            self.pool.shutdown(cancel_futures=True)
 
 
 def pmap(
     fn: Callable,
     items: Sequence,
-    jobs: int | None,
+    jobs: int,
     per_worker: int,
     desc: str = "",
     progress: bool = False,
