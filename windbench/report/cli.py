@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
 
     matplotlib.use("Agg")
     from windbench.report.build import build_report
-    from windbench.report.parallel import default_jobs
+    from windbench.runtime import available_cores
 
     try:
         report = build_report(
@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
             export=args.export,
             export_every=args.export_every,
             progress=not args.quiet,
-            jobs=args.jobs or default_jobs(),
+            jobs=args.jobs or available_cores(),
         )
     except FileNotFoundError as err:
         print(f"windbench-report: error: {err}", file=sys.stderr)

@@ -19,8 +19,6 @@ from concurrent.futures import ProcessPoolExecutor
 
 from tqdm.auto import tqdm
 
-from windbench.runtime import available_cores
-
 
 def worker_count(jobs: int, pieces: int, per_worker: int) -> int:
     """Processes for ``pieces`` independent pieces: ``jobs`` at most, and at most one per
@@ -28,11 +26,6 @@ def worker_count(jobs: int, pieces: int, per_worker: int) -> int:
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     return max(1, min(jobs, pieces // per_worker))
-
-
-def default_jobs() -> int:
-    """What ``windbench-report`` uses without ``--jobs``: the cores this process may use."""
-    return available_cores()
 
 
 class Batch:
