@@ -12,7 +12,16 @@ from windbench.cloth.collision import max_penetration
 from windbench.cloth.edge_contact import edge_minimum, surface_penetration
 from windbench.cloth.mesh import flag_mesh
 from windbench.cloth.model import ClothModel
-from windbench.cloth.self_contact import self_contact_model, self_intersections
+from windbench.cloth.self_contact import (
+    LEAF,
+    leaf_pairs,
+    patch_tree,
+    refit,
+    self_contact_model,
+    self_intersections,
+    tree_fit,
+    triangles_cross,
+)
 from windbench.cloth.solver import XPBDCloth
 from windbench.config import ClothConfig
 from windbench.errors import ConfigError
@@ -160,3 +169,86 @@ def test_a_bad_self_contact_key_is_named(key, value):
     setattr(cfg, key, value)
     with pytest.raises(ConfigError, match=f"cloth.{key}"):
         XPBDCloth.check(model, cfg)
+
+
+def _crumpled(n=9, seed=3):
+    """A sheet of n x n vertices crumpled by random smooth bumps and a fold: its triangles
+    cross each other in places."""
+    model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 1.0, n)])
+    x = model.rest_positions.copy()
+    rng = np.random.default_rng(seed)
+    x += 0.15 * rng.standard_normal(x.shape)
+    return model, x
+
+
+def _brute_force_crossings(triangles, x):
+    """Every pair of triangles without a common vertex, the exact segment test."""
+    count = 0
+    for f in range(len(triangles)):
+        for g in range(f + 1, len(triangles)):
+            if set(triangles[f]) & set(triangles[g]):
+                continue
+            count += bool(triangles_cross(x, triangles[f], triangles[g]))
+    return count
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_patch_hierarchy_counts_the_crossings_a_brute_force_search_finds(seed):
+    """Culling by boxes and 90-degree normal cones loses no crossing pair: the count equals
+    the all-pairs search on randomly crumpled sheets (which cross themselves in many
+    places)."""
+    model, x = _crumpled(seed=seed)
+    sc = self_contact_model(model.rest_positions, model.triangles, True, 0.005)
+    expected = _brute_force_crossings(sc.triangles, x)
+    assert expected > 5
+    assert self_intersections(sc, x) == expected
+
+
+def test_a_flat_sheet_needs_no_leaf_tests_and_a_folded_one_does():
+    """A plane sheet is one flat patch: no leaf pair is tested. Folded in half onto itself
+    (the upper half turned over, 2 mm above the lower), the halves' patches are tested
+    against each other."""
+    model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 1.0, 17)])
+    sc = self_contact_model(model.rest_positions, model.triangles, True, 0.005)
+    x = model.rest_positions.copy()
+    fit = tree_fit(sc, x.shape[0])
+    refit(sc.tree, sc.triangles, x, fit)
+    assert leaf_pairs(sc.tree, sc.triangles, fit, 0.5, 0.02)[1] == 0
+    upper = x[:, 1] > 0.5
+    x[upper, 1] = 1.0 - x[upper, 1]
+    x[upper, 2] = 0.002 + 0.001 * (x[upper, 1] < 0.49)
+    refit(sc.tree, sc.triangles, x, fit)
+    pairs, found = leaf_pairs(sc.tree, sc.triangles, fit, 0.5, 0.02)
+    assert found > 0
+    leaf_of = np.empty(len(sc.triangles), int)
+    for k in np.flatnonzero(sc.tree.left < 0):
+        leaf_of[sc.tree.order[sc.tree.first[k] : sc.tree.first[k] + sc.tree.count[k]]] = k
+    centre = sc.triangles.mean(axis=1)
+    lower = x[sc.triangles].mean(axis=1)[:, 1] < 0.45
+    assert centre.size and lower.any()
+    tested = {(min(a, b), max(a, b)) for a, b in pairs[:found]}
+    # the triangle over the lower half's middle and the one under it share a tested pair
+    top = np.flatnonzero(~lower & (x[sc.triangles].mean(axis=1)[:, 2] > 0.001))
+    assert any(
+        (min(leaf_of[f], leaf_of[g]), max(leaf_of[f], leaf_of[g])) in tested
+        for f in top[:1]
+        for g in np.flatnonzero(lower)
+        if np.linalg.norm(x[sc.triangles[f]].mean(0)[:2] - x[sc.triangles[g]].mean(0)[:2]) < 0.05
+    )
+
+
+def test_the_patch_hierarchy_partitions_the_triangles_and_knows_separate_pieces():
+    """Every triangle lies in exactly one leaf; two separate sheets are not one piece at
+    the root, each sheet's own subtree is."""
+    a = _sheet((0.0, 0.0, 0.0), 1.0, 6, name="a")
+    b = _sheet((0.0, 0.0, 3.0), 1.0, 6, name="b")  # the root splits along z
+    model = ClothModel.from_meshes([a, b])
+    tree = patch_tree(model.rest_positions, model.triangles)
+    leaves = np.flatnonzero(tree.left < 0)
+    covered = np.concatenate(
+        [tree.order[tree.first[k] : tree.first[k] + tree.count[k]] for k in leaves]
+    )
+    assert np.array_equal(np.sort(covered), np.arange(len(model.triangles)))
+    assert tree.count[leaves].max() <= LEAF
+    assert not tree.connected[0]
+    assert tree.connected[tree.left[0]] and tree.connected[tree.right[0]]

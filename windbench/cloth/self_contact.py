@@ -1,4 +1,5 @@
-"""Self-collision and cloth-cloth collision: vertices against triangles through a spatial hash.
+"""Self-collision and cloth-cloth collision: vertices against triangles and edges against
+edges, culled by a bounding-volume hierarchy with normal cones.
 
 The paper's cloth system [MKE03] keeps cloth from passing through itself. All cloth pieces
 of a scene are one mesh here (:class:`~windbench.cloth.model.ClothModel`), so one pass
@@ -12,31 +13,66 @@ the triangle's plane then):
     dx_i = -C w_i s n / den,   dx_k = C beta_k w_k s n / den.
 
 A vertex that crosses a triangle within one substep is thus brought back while it lies
-within REACH x thickness of the triangle's plane. Two edges that cross without a vertex near a
-triangle (a sheet draped over another's border) are kept apart the same way at their
+within REACH x thickness of the triangle's plane. Two edges that cross without a vertex near
+a triangle (a sheet draped over another's border) are kept apart the same way at their
 closest points (:func:`push_edges`, n = e1 x e2).
 
-Broad phase: a spatial hash (:func:`build_hash`) of the triangles' boxes grown by
-REACH x thickness plus half the longest edge on a lattice of cells ``cell`` wide (the mean rest edge length, at
-least REACH x thickness), rebuilt every substep; a vertex reads the bucket of its own cell, an edge that of its
-midpoint. Two
-cells that share a bucket only add candidates, which the exact test rejects.
+Broad phase (:func:`leaf_pairs`): a fixed hierarchy of triangle patches
+(:func:`patch_tree`: median splits of the rest-pose centroids, leaves of at most LEAF
+triangles), whose boxes and normal cones are refitted to the current positions every
+substep (:func:`refit`). A patch is tested against itself only when it is not flat, and two
+patches only when their boxes come within the contact reach and they are not one flat
+patch together. Flat means a connected patch whose normals lie within a cone of half-angle
+below 90 degrees: such a surface is a height field over the plane normal to the cone's
+axis and cannot meet itself (Volino and Magnenat-Thalmann 1994, "Efficient self-collision
+detection on smoothly discretized surface animations using geometrical shape regularity";
+Provot 1997 uses the same cones for cloth). Their second condition, that the patch's
+contour does not overlap itself in that projection, is not tested, as in most cloth
+solvers: a flat patch wound like a spiral ramp is missed. The contacts use a narrower cone,
+CONTACT_CONE: where the normals stay within it, two points of the patch within the reach of
+each other lie within reach / cos(CONTACT_CONE) of each other along the surface, a pair of
+neighbours that the thickness test would reject anyway; the intersection figure uses the
+exact 90 degrees. A flag that only ripples costs the refit and the top of the tree.
 
 The figure :func:`self_intersections` counts intersecting triangle pairs: two triangles
 without a common vertex of which an edge of one crosses the other (segment-triangle test,
-Moeller-Trumbore), through the same hash.
+Moeller-Trumbore), through the same hierarchy.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-TABLE_PER_TRIANGLE = 2  # hash buckets per triangle
+LEAF = 4  # triangles per leaf patch at most
 REACH = 4.0  # a vertex this many thicknesses behind a triangle is brought back
-_P1, _P2, _P3 = 73856093, 19349663, 83492791  # Teschner et al. 2003 hash primes
+CONTACT_CONE = math.radians(60.0)  # a patch is flat for the contacts below this half-angle
+_COS_CONTACT = math.cos(CONTACT_CONE)
+_COS_CROSSING = 0.0  # 90 degrees: exact for intersections (module docstring)
+_WIDE = -2.0  # the cosine recorded for a cone of 90 degrees or more
+
+
+class PatchTree(NamedTuple):
+    """The fixed hierarchy of triangle patches (:func:`patch_tree`), nodes in preorder
+    (children after their parent): node k holds the triangles order[first[k]:first[k] +
+    count[k]]; a leaf has left = right = -1 and lists its distinct vertices
+    leaf_vert[vert_ptr[k]:vert_ptr[k + 1]] and edges leaf_edge[edge_ptr[k]:edge_ptr[k + 1]]
+    (empty ranges for inner nodes)."""
+
+    order: np.ndarray  # (m,) triangle ids, patch by patch
+    first: np.ndarray  # (N,)
+    count: np.ndarray  # (N,)
+    left: np.ndarray  # (N,) child, -1: a leaf
+    right: np.ndarray  # (N,)
+    connected: np.ndarray  # (N,) bool: the patch's triangles are one piece (sufficient test)
+    vert_ptr: np.ndarray  # (N + 1,)
+    leaf_vert: np.ndarray
+    edge_ptr: np.ndarray  # (N + 1,)
+    leaf_edge: np.ndarray  # (.., 2)
+    depth: int  # levels below the root
 
 
 class SelfContact(NamedTuple):
@@ -45,61 +81,296 @@ class SelfContact(NamedTuple):
     on: bool  # cloth.self_collision
     triangles: np.ndarray  # (m, 3) global vertex ids, every cloth
     thickness: float  # m
-    cell: float  # m: hash cell size
+    tree: PatchTree
+
+
+class TreeFit(NamedTuple):
+    """What :func:`refit` computes for the current positions, and the traversal's scratch."""
+
+    normals: np.ndarray  # (m, 3) area-weighted normals 2 A n of the triangles
+    box: np.ndarray  # (N, 6) lower and upper corners of each patch's box
+    cone: np.ndarray  # (N, 5): area-weighted normal sum (3), cos and sin of the half-angle
+    stamp: np.ndarray  # (n,) vertex marks of the adjacency test
+    clock: np.ndarray  # (1,) the last mark
+    stack: np.ndarray  # (S, 2) node pairs still to visit
+
+
+def _split(centroid, order, lo, hi, nodes, depth):
+    """Append the node of order[lo:hi] and, recursively, its children (preorder); the
+    triangles are split at the median of their centroids along the widest axis."""
+    k = len(nodes)
+    nodes.append([lo, hi - lo, -1, -1])
+    if hi - lo <= LEAF:
+        return depth
+    c = centroid[order[lo:hi]]
+    axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
+    mid = (lo + hi) // 2
+    order[lo:hi] = order[lo:hi][np.argsort(c[:, axis], kind="stable")]
+    nodes[k][2] = len(nodes)
+    d_left = _split(centroid, order, lo, mid, nodes, depth + 1)
+    nodes[k][3] = len(nodes)
+    return max(d_left, _split(centroid, order, mid, hi, nodes, depth + 1))
+
+
+def _one_piece(tris: np.ndarray) -> bool:
+    """Whether a few triangles form one piece through shared vertices."""
+    piece = {int(v) for v in tris[0]}
+    rest = [set(map(int, t)) for t in tris[1:]]
+    grown = True
+    while rest and grown:
+        grown = False
+        for t in list(rest):
+            if piece & t:
+                piece |= t
+                rest.remove(t)
+                grown = True
+    return not rest
+
+
+def _csr(lists):
+    """(ptr, values) of a list of arrays."""
+    ptr = np.zeros(len(lists) + 1, np.int64)
+    ptr[1:] = np.cumsum([len(a) for a in lists])
+    values = np.concatenate(lists) if lists else np.zeros(0, np.int64)
+    return ptr, values
+
+
+def patch_tree(rest, triangles) -> PatchTree:
+    """The hierarchy of the module docstring over ``triangles`` at the rest positions.
+
+    ``connected`` is a sufficient test: a leaf whose triangles share vertices in a chain,
+    an inner node whose children are connected and share a vertex."""
+    tri = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    m = tri.shape[0]
+    order = np.arange(m, dtype=np.int64)
+    nodes: list[list[int]] = []
+    depth = _split(rest[tri].mean(axis=1), order, 0, m, nodes, 0) if m else 0
+    first, count, left, right = (np.array(col, np.int64) for col in zip(*nodes, strict=True))
+    connected = np.zeros(len(nodes), np.bool_)
+    verts, edges = [], []
+    for k in range(len(nodes) - 1, -1, -1):
+        own = tri[order[first[k] : first[k] + count[k]]]
+        if left[k] < 0:
+            connected[k] = _one_piece(own)
+            verts.append(np.unique(own))
+            pairs = np.sort(own[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+            edges.append(np.unique(pairs, axis=0))
+        else:
+            a, b = left[k], right[k]
+            shared = np.intersect1d(
+                tri[order[first[a] : first[a] + count[a]]],
+                tri[order[first[b] : first[b] + count[b]]],
+            )
+            connected[k] = connected[a] and connected[b] and shared.size > 0
+            verts.append(np.zeros(0, np.int64))
+            edges.append(np.zeros((0, 2), np.int64))
+    vert_ptr, leaf_vert = _csr(verts[::-1])
+    edge_ptr, leaf_edge = _csr(edges[::-1])
+    return PatchTree(
+        order,
+        first,
+        count,
+        left,
+        right,
+        connected,
+        vert_ptr,
+        leaf_vert.astype(np.int64),
+        edge_ptr,
+        np.ascontiguousarray(leaf_edge.reshape(-1, 2), np.int64),
+        depth,
+    )
 
 
 def self_contact_model(rest, triangles, on: bool, thickness: float) -> SelfContact:
-    """:class:`SelfContact` with the cell size of the module docstring."""
+    """:class:`SelfContact` with the patch hierarchy of the rest positions."""
     tri = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
-    if tri.shape[0]:
-        sides = np.linalg.norm(rest[tri[:, [1, 2, 0]]] - rest[tri], axis=2)
-        mean_edge = float(sides.mean())
-    else:
-        mean_edge = 1.0
-    return SelfContact(bool(on), tri, float(thickness), max(mean_edge, REACH * thickness, 1e-6))
+    rest = np.asarray(rest, np.float64)
+    return SelfContact(bool(on), tri, float(thickness), patch_tree(rest, tri))
+
+
+def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
+    """Scratch for :func:`refit` and :func:`leaf_pairs` of ``sc``."""
+    nodes = sc.tree.first.shape[0]
+    return TreeFit(
+        np.zeros((sc.triangles.shape[0], 3)),
+        np.zeros((nodes, 6)),
+        np.zeros((nodes, 5)),
+        np.zeros(n_vertices, np.int64),
+        np.zeros(1, np.int64),
+        np.zeros((8 * (sc.tree.depth + 2), 2), np.int64),
+    )
 
 
 @njit(cache=True, inline="always")
-def _bucket(ix, iy, iz, size):
-    return ((ix * _P1) ^ (iy * _P2) ^ (iz * _P3)) % size
+def _widened(sx, sy, sz, cone, k):
+    """(cos, sin) of phi + theta: the cone of patch k (its row of ``cone``) seen from the
+    axis (sx, sy, sz) / |s|, phi the angle between the axes; _WIDE when it reaches 90
+    degrees (both angles below 90 degrees: the sum is below 180 and the addition formulas
+    hold)."""
+    if cone[k, 3] <= _WIDE:
+        return _WIDE, 0.0
+    cx, cy, cz = cone[k, 0], cone[k, 1], cone[k, 2]
+    norm = math.sqrt((sx * sx + sy * sy + sz * sz) * (cx * cx + cy * cy + cz * cz))
+    if norm == 0.0:
+        return _WIDE, 0.0
+    c_phi = (sx * cx + sy * cy + sz * cz) / norm
+    if c_phi <= 0.0:
+        return _WIDE, 0.0
+    s_phi = math.sqrt(max(0.0, 1.0 - c_phi * c_phi))
+    c = c_phi * cone[k, 3] - s_phi * cone[k, 4]
+    if c <= 0.0:
+        return _WIDE, 0.0
+    return c, s_phi * cone[k, 3] + c_phi * cone[k, 4]
 
 
 @njit(cache=True, inline="always")
-def _cell_range(p, tri, grow, cell):
-    """Lowest and highest cell indices (3,) of the box of triangle ``tri`` grown by ``grow``."""
-    lo, hi = np.empty(3, np.int64), np.empty(3, np.int64)
-    for a in range(3):
-        low = min(p[tri[0], a], p[tri[1], a], p[tri[2], a]) - grow
-        high = max(p[tri[0], a], p[tri[1], a], p[tri[2], a]) + grow
-        lo[a], hi[a] = np.int64(np.floor(low / cell)), np.int64(np.floor(high / cell))
-    return lo, hi
+def _union_cos(cone, a, b):
+    """cos of the half-angle of one cone around the normals of patches a and b."""
+    sx, sy, sz = cone[a, 0] + cone[b, 0], cone[a, 1] + cone[b, 1], cone[a, 2] + cone[b, 2]
+    return min(_widened(sx, sy, sz, cone, a)[0], _widened(sx, sy, sz, cone, b)[0])
 
 
 @njit(cache=True)
-def build_hash(p, triangles, grow, cell):
-    """(start (size + 1,), entries): the triangles whose box grown by ``grow`` meets a cell,
-    bucket by bucket (counting sort): bucket k holds entries[start[k]:start[k + 1]]."""
-    size = max(1, TABLE_PER_TRIANGLE * triangles.shape[0])
-    start = np.zeros(size + 1, np.int64)
+def refit(tree, triangles, p, fit):
+    """Boxes and normal cones of every patch at positions ``p`` (module docstring), leaves
+    from their triangles, inner nodes from their children (the nodes in reverse preorder).
+    The loops see plain arrays only: a named tuple handed to a helper in a loop costs
+    reference counts for each of its arrays on every pass."""
+    normals, box, cone = fit.normals, fit.box, fit.cone
+    order, first, count, left, right = tree.order, tree.first, tree.count, tree.left, tree.right
     for f in range(triangles.shape[0]):
-        lo, hi = _cell_range(p, triangles[f], grow, cell)
-        for ix in range(lo[0], hi[0] + 1):
-            for iy in range(lo[1], hi[1] + 1):
-                for iz in range(lo[2], hi[2] + 1):
-                    start[_bucket(ix, iy, iz, size) + 1] += 1
-    for k in range(size):
-        start[k + 1] += start[k]
-    fill = start[:-1].copy()
-    entries = np.empty(start[size], np.int64)
-    for f in range(triangles.shape[0]):
-        lo, hi = _cell_range(p, triangles[f], grow, cell)
-        for ix in range(lo[0], hi[0] + 1):
-            for iy in range(lo[1], hi[1] + 1):
-                for iz in range(lo[2], hi[2] + 1):
-                    k = _bucket(ix, iy, iz, size)
-                    entries[fill[k]] = f
-                    fill[k] += 1
-    return start, entries
+        a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        e1x, e1y, e1z = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+        e2x, e2y, e2z = p[c, 0] - p[a, 0], p[c, 1] - p[a, 1], p[c, 2] - p[a, 2]
+        normals[f, 0] = e1y * e2z - e1z * e2y  # 2 A n
+        normals[f, 1] = e1z * e2x - e1x * e2z
+        normals[f, 2] = e1x * e2y - e1y * e2x
+    for k in range(first.shape[0] - 1, -1, -1):
+        if left[k] < 0:
+            _refit_leaf(order, first[k], first[k] + count[k], triangles, p, normals, box, cone, k)
+            continue
+        l, r = left[k], right[k]
+        for a in range(3):
+            box[k, a] = min(box[l, a], box[r, a])
+            box[k, 3 + a] = max(box[l, 3 + a], box[r, 3 + a])
+            cone[k, a] = cone[l, a] + cone[r, a]
+        cl, sl = _widened(cone[k, 0], cone[k, 1], cone[k, 2], cone, l)
+        cr, sr = _widened(cone[k, 0], cone[k, 1], cone[k, 2], cone, r)
+        cone[k, 3], cone[k, 4] = (cl, sl) if cl < cr else (cr, sr)
+
+
+@njit(cache=True, inline="always")
+def _refit_leaf(order, start, stop, triangles, p, normals, box, cone, k):
+    """The box of leaf k's vertices and the cone around the normals of its triangles
+    order[start:stop] (scalars: it runs for every leaf in every substep)."""
+    x0 = y0 = z0 = np.inf
+    x1 = y1 = z1 = -np.inf
+    sx = sy = sz = 0.0
+    for j in range(start, stop):
+        f = order[j]
+        sx, sy, sz = sx + normals[f, 0], sy + normals[f, 1], sz + normals[f, 2]
+        for v in range(3):
+            i = triangles[f, v]
+            x0, x1 = min(x0, p[i, 0]), max(x1, p[i, 0])
+            y0, y1 = min(y0, p[i, 1]), max(y1, p[i, 1])
+            z0, z1 = min(z0, p[i, 2]), max(z1, p[i, 2])
+    box[k, 0], box[k, 1], box[k, 2], box[k, 3], box[k, 4], box[k, 5] = x0, y0, z0, x1, y1, z1
+    cone[k, 0], cone[k, 1], cone[k, 2] = sx, sy, sz
+    norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+    low = 1.0
+    for j in range(start, stop):
+        f = order[j]
+        nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
+        nf = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if norm == 0.0 or nf == 0.0:
+            low = _WIDE
+            break
+        low = min(low, (sx * nx + sy * ny + sz * nz) / (norm * nf))
+    cone[k, 3], cone[k, 4] = (
+        (low, math.sqrt(max(0.0, 1.0 - low * low))) if low > 0.0 else (_WIDE, 0.0)
+    )
+
+
+@njit(cache=True, inline="always")
+def _boxes_near(box, a, b, gap):
+    """Whether the boxes of patches a and b come within ``gap`` of each other."""
+    for k in range(3):
+        if box[a, 3 + k] + gap < box[b, k] or box[b, 3 + k] + gap < box[a, k]:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _adjacent(order, first, count, triangles, a, b, stamp, clock):
+    """Whether patches a and b share a vertex (marks in ``stamp``, clock[0] the last)."""
+    clock[0] += 1
+    t = clock[0]
+    for j in range(first[a], first[a] + count[a]):
+        for v in range(3):
+            stamp[triangles[order[j], v]] = t
+    for j in range(first[b], first[b] + count[b]):
+        for v in range(3):
+            if stamp[triangles[order[j], v]] == t:
+                return True
+    return False
+
+
+@njit(cache=True)
+def leaf_pairs(tree, triangles, fit, cos_flat, gap):
+    """(pairs (K, 2), K): the leaf patches to test, (a, a) against itself and (a, b) against
+    each other (module docstring): a patch is skipped when it is connected and its cone's
+    cosine exceeds ``cos_flat``; two patches when their boxes are more than ``gap`` apart,
+    or when they are connected, share a vertex and fit in one such cone together."""
+    box, cone, stack, stamp, clock = fit.box, fit.cone, fit.stack, fit.stamp, fit.clock
+    order, first, count, left, right = tree.order, tree.first, tree.count, tree.left, tree.right
+    connected = tree.connected
+    pairs = np.empty((64, 2), np.int64)
+    found = 0
+    top = 1
+    stack[0, 0] = stack[0, 1] = 0
+    while top > 0:
+        top -= 1
+        a, b = stack[top, 0], stack[top, 1]
+        if a == b:
+            if connected[a] and cone[a, 3] > cos_flat:
+                continue
+            if left[a] >= 0:
+                l, r = left[a], right[a]
+                stack[top, 0], stack[top, 1] = l, l
+                stack[top + 1, 0], stack[top + 1, 1] = r, r
+                stack[top + 2, 0], stack[top + 2, 1] = l, r
+                top += 3
+                continue
+        else:
+            if not _boxes_near(box, a, b, gap):
+                continue
+            if (
+                connected[a]
+                and connected[b]
+                and _union_cos(cone, a, b) > cos_flat
+                and _adjacent(order, first, count, triangles, a, b, stamp, clock)
+            ):
+                continue
+            split_a = left[a] >= 0 and (left[b] < 0 or count[a] >= count[b])
+            if split_a or left[b] >= 0:
+                big, other = (a, b) if split_a else (b, a)
+                stack[top, 0], stack[top, 1] = left[big], other
+                stack[top + 1, 0], stack[top + 1, 1] = right[big], other
+                top += 2
+                continue
+        if found == pairs.shape[0]:
+            pairs = _grown(pairs)
+        pairs[found, 0], pairs[found, 1] = a, b
+        found += 1
+    return pairs, found
+
+
+@njit(cache=True, inline="always")
+def _grown(rows):
+    """``rows`` (K, w) copied into an array of twice the rows."""
+    out = np.empty((2 * rows.shape[0], rows.shape[1]), rows.dtype)
+    out[: rows.shape[0]] = rows
+    return out
 
 
 @njit(cache=True, inline="always")
@@ -123,30 +394,32 @@ def _height(p, tri, i, nx, ny, nz):
 
 
 @njit(cache=True, inline="always")
-def _barycentric(p, tri, i, nx, ny, nz, area2):
-    """Barycentric coordinates of the projection of vertex i on the plane of ``tri``:
+def _barycentric(p, tri, i, nx, ny, nz, area2, k):
+    """Barycentric coordinate k of the projection of vertex i on the plane of ``tri``:
     beta_k = ((x_b - x_a) x (x_i - x_a)) . n / 2A over the edge a-b opposite corner k."""
-    out = np.empty(3)
-    for k in range(3):
-        a, b = tri[(k + 1) % 3], tri[(k + 2) % 3]
-        ux, uy, uz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
-        wx, wy, wz = p[i, 0] - p[a, 0], p[i, 1] - p[a, 1], p[i, 2] - p[a, 2]
-        cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
-        out[k] = (cx * nx + cy * ny + cz * nz) / area2
-    return out
+    a, b = tri[(k + 1) % 3], tri[(k + 2) % 3]
+    ux, uy, uz = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+    wx, wy, wz = p[i, 0] - p[a, 0], p[i, 1] - p[a, 1], p[i, 2] - p[a, 2]
+    cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+    return (cx * nx + cy * ny + cz * nz) / area2
 
 
 @njit(cache=True)
-def push_vertex(p, xp, inv_mass, i, tri, thickness):
-    """The vertex-triangle contact of vertex i and triangle ``tri`` (module docstring).
-    Returns C (0 when they do not touch)."""
+def push_vertex(p, xp, inv_mass, i, tri, thickness, reach):
+    """The vertex-triangle contact of vertex i and triangle ``tri`` (module docstring),
+    for a vertex within ``reach`` of the triangle's plane. Returns C (0 when they do not
+    touch)."""
     nx, ny, nz, area2 = _plane(p, tri)
     if area2 == 0.0:
         return 0.0
     dist = _height(p, tri, i, nx, ny, nz)
-    if abs(dist) >= REACH * thickness:
+    if abs(dist) >= reach:
         return 0.0
-    beta = _barycentric(p, tri, i, nx, ny, nz, area2)
+    beta = (
+        _barycentric(p, tri, i, nx, ny, nz, area2, 0),
+        _barycentric(p, tri, i, nx, ny, nz, area2, 1),
+        _barycentric(p, tri, i, nx, ny, nz, area2, 2),
+    )
     if beta[0] < 0.0 or beta[1] < 0.0 or beta[2] < 0.0:
         return 0.0
     mx, my, mz, a0 = _plane(xp, tri)
@@ -218,13 +491,14 @@ def _segment_parameters(p, i, j, k, l):
 
 
 @njit(cache=True)
-def push_edges(p, xp, inv_mass, i, j, k, l, thickness):
-    """The edge-edge contact of edges i-j and k-l: their closest points q1, q2 (both inside
-    the edges) kept ``thickness`` apart along n = e1 x e2 on the side they lay on at the
-    start of the substep: C = s (q1 - q2) . n - thickness, the four vertices moved with
-    their barycentric weights and inverse masses. Returns C (0 when they do not touch)."""
+def push_edges(p, xp, inv_mass, i, j, k, l, thickness, reach):
+    """The edge-edge contact of edges i-j and k-l closer than ``reach``: their closest
+    points q1, q2 (both inside the edges) kept ``thickness`` apart along n = e1 x e2 on the
+    side they lay on at ``xp``: C = s (q1 - q2) . n - thickness, the four vertices moved
+    with their barycentric weights and inverse masses. Returns C (0 when they do not
+    touch)."""
     s, u, gap2 = _segment_parameters(p, i, j, k, l)
-    if s <= 0.0 or s >= 1.0 or u <= 0.0 or u >= 1.0 or gap2 >= thickness * thickness:
+    if s <= 0.0 or s >= 1.0 or u <= 0.0 or u >= 1.0 or gap2 >= reach * reach:
         return 0.0  # apart, or nearest at an end point: the vertex-triangle contacts' business
     n = np.cross(p[j] - p[i], p[l] - p[k])
     norm = np.sqrt(np.dot(n, n))
@@ -233,7 +507,7 @@ def push_edges(p, xp, inv_mass, i, j, k, l, thickness):
     n /= norm
     gap = (1.0 - s) * p[i] + s * p[j] - (1.0 - u) * p[k] - u * p[l]
     dist = np.dot(gap, n)
-    if abs(dist) >= thickness or np.dot(gap, gap) >= thickness * thickness:
+    if abs(dist) >= reach or np.dot(gap, gap) >= reach * reach:
         return 0.0
     before = (1.0 - s) * xp[i] + s * xp[j] - (1.0 - u) * xp[k] - u * xp[l]
     side = np.dot(before, n)
@@ -253,71 +527,126 @@ def push_edges(p, xp, inv_mass, i, j, k, l, thickness):
     return c
 
 
-@njit(cache=True)
-def _edge_contacts(sc, edges, inv_mass, p, xp, start, entries):
-    """Every edge against the edges of the triangles hashed in the cell of its midpoint
-    (:func:`push_edges`; the hash grows the triangles' boxes by half the longest edge, so
-    that cell holds every triangle within the reach of any point of the edge)."""
-    _, triangles, thickness, cell = sc
-    size = start.shape[0] - 1
-    for e in range(edges.shape[0]):
-        i, j = edges[e, 0], edges[e, 1]
-        if inv_mass[i] + inv_mass[j] == 0.0:
-            continue
-        k = _bucket(
-            np.int64(np.floor(0.5 * (p[i, 0] + p[j, 0]) / cell)),
-            np.int64(np.floor(0.5 * (p[i, 1] + p[j, 1]) / cell)),
-            np.int64(np.floor(0.5 * (p[i, 2] + p[j, 2]) / cell)),
-            size,
-        )
-        for m in range(start[k], start[k + 1]):
-            tri = triangles[entries[m]]
-            for t in range(3):
-                a, b = tri[t], tri[(t + 1) % 3]
-                if a == i or a == j or b == i or b == j or min(a, b) < min(i, j):
-                    continue  # each pair of edges from the edge with the lower id
-                if not _apart(p, i, j, a, b, thickness):
-                    push_edges(p, xp, inv_mass, i, j, a, b, thickness)
+@njit(cache=True, inline="always")
+def _incident(tri, i):
+    return tri[0] == i or tri[1] == i or tri[2] == i
+
+
+@njit(cache=True, inline="always")
+def _outside_patch(p, box, k, i, gap):
+    """Whether vertex i lies outside the box of patch k grown by ``gap``."""
+    for a in range(3):
+        if p[i, a] + gap < box[k, a] or p[i, a] - gap > box[k, 3 + a]:
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _edge_outside_patch(p, box, k, i, j, gap):
+    """Whether the box of edge i-j lies outside the box of patch k grown by ``gap``."""
+    for a in range(3):
+        if max(p[i, a], p[j, a]) + gap < box[k, a] or min(p[i, a], p[j, a]) - gap > box[k, 3 + a]:
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _vertex_near_triangle(p, i, tri, reach):
+    """Whether vertex i lies within ``reach`` of the plane of ``tri`` and projects inside
+    it: the part of :func:`push_vertex`'s test that does not need the start positions."""
+    nx, ny, nz, area2 = _plane(p, tri)
+    if area2 == 0.0 or abs(_height(p, tri, i, nx, ny, nz)) >= reach:
+        return False
+    for k in range(3):
+        if _barycentric(p, tri, i, nx, ny, nz, area2, k) < 0.0:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _edges_near(p, i, j, k, l, reach):
+    """Whether edges i-j and k-l come within ``reach`` at points inside both (the first
+    test of :func:`push_edges`)."""
+    if _apart(p, i, j, k, l, reach):
+        return False
+    s, u, gap2 = _segment_parameters(p, i, j, k, l)
+    return 0.0 < s < 1.0 and 0.0 < u < 1.0 and gap2 < reach * reach
 
 
 @njit(cache=True)
-def _longest(p, edges):
-    """The length of the longest edge at ``p``."""
-    top = 0.0
-    for e in range(edges.shape[0]):
-        d2 = 0.0
-        for a in range(3):
-            d2 += (p[edges[e, 0], a] - p[edges[e, 1], a]) ** 2
-        top = max(top, d2)
-    return np.sqrt(top)
+def close_pairs(sc, p, box, pairs, found, reach):
+    """(vertex-triangle pairs (K, 2): vertex, triangle; edge pairs (L, 2): rows of
+    ``leaf_edge``) that may touch at ``p`` within the leaf pairs ``pairs[:found]``:
+    vertices within ``reach`` of a triangle's plane and projecting inside it, edges within
+    ``reach`` at inner points. Found in a loop of plain arrays and scalar tests, and
+    pushed apart after it (:func:`self_contacts`): a call inside the search loop would cost
+    reference counts on every pass."""
+    tree, triangles = sc.tree, sc.triangles
+    order, first, count = tree.order, tree.first, tree.count
+    vert_ptr, leaf_vert, edge_ptr, edges = (
+        tree.vert_ptr,
+        tree.leaf_vert,
+        tree.edge_ptr,
+        tree.leaf_edge,
+    )
+    vt = np.empty((64, 2), np.int64)
+    ee = np.empty((64, 2), np.int64)
+    n_vt = n_ee = 0
+    for q in range(found):
+        a, b = pairs[q, 0], pairs[q, 1]
+        for side in range(1 if a == b else 2):
+            va, tb = (a, b) if side == 0 else (b, a)
+            for w in range(vert_ptr[va], vert_ptr[va + 1]):
+                i = leaf_vert[w]
+                if _outside_patch(p, box, tb, i, reach):
+                    continue
+                for j in range(first[tb], first[tb] + count[tb]):
+                    f = order[j]
+                    tri = (triangles[f, 0], triangles[f, 1], triangles[f, 2])  # no array view
+                    if _incident(tri, i) or _outside_box(p, tri, i, reach):
+                        continue
+                    if _vertex_near_triangle(p, i, tri, reach):
+                        if n_vt == vt.shape[0]:
+                            vt = _grown(vt)
+                        vt[n_vt, 0], vt[n_vt, 1] = i, f
+                        n_vt += 1
+        for e in range(edge_ptr[a], edge_ptr[a + 1]):
+            i, j = edges[e, 0], edges[e, 1]
+            if _edge_outside_patch(p, box, b, i, j, reach):
+                continue
+            for g in range(e + 1 if a == b else edge_ptr[b], edge_ptr[b + 1]):
+                k, l = edges[g, 0], edges[g, 1]
+                if i == k or i == l or j == k or j == l:
+                    continue
+                if _edges_near(p, i, j, k, l, reach):
+                    if n_ee == ee.shape[0]:
+                        ee = _grown(ee)
+                    ee[n_ee, 0], ee[n_ee, 1] = e, g
+                    n_ee += 1
+    return vt[:n_vt], ee[:n_ee]
 
 
 @njit(cache=True)
-def self_contacts(sc, edges, inv_mass, p, xp):
-    """One pass of vertex-triangle contacts over every vertex, then of edge-edge contacts
-    over every edge (module docstring)."""
-    _, triangles, thickness, cell = sc
+def self_contacts(sc, inv_mass, p, x0, fit):
+    """One pass of the contacts of the module docstring, each vertex and edge kept on the
+    side it lay on at ``x0`` (the substep's start): over the leaf patches that may touch
+    (:func:`leaf_pairs` after :func:`refit`, then :func:`close_pairs`), vertices against
+    triangles, then edges against edges."""
+    triangles, thickness, edges = sc.triangles, sc.thickness, sc.tree.leaf_edge
     if triangles.shape[0] == 0:
         return
-    start, entries = build_hash(p, triangles, REACH * thickness + 0.5 * _longest(p, edges), cell)
-    size = start.shape[0] - 1
-    for i in range(p.shape[0]):
-        k = _bucket(
-            np.int64(np.floor(p[i, 0] / cell)),
-            np.int64(np.floor(p[i, 1] / cell)),
-            np.int64(np.floor(p[i, 2] / cell)),
-            size,
-        )
-        for j in range(start[k], start[k + 1]):
-            tri = triangles[entries[j]]
-            if tri[0] == i or tri[1] == i or tri[2] == i:
-                continue
-            if inv_mass[i] == 0.0 and inv_mass[tri[0]] + inv_mass[tri[1]] + inv_mass[tri[2]] == 0:
-                continue
-            if _outside_box(p, tri, i, REACH * thickness):
-                continue
-            push_vertex(p, xp, inv_mass, i, tri, thickness)
-    _edge_contacts(sc, edges, inv_mass, p, xp, start, entries)
+    reach = REACH * thickness
+    refit(sc.tree, triangles, p, fit)
+    pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_CONTACT, reach)
+    vt, ee = close_pairs(sc, p, fit.box, pairs, found, reach)
+    for q in range(vt.shape[0]):
+        f = vt[q, 1]
+        tri = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
+        push_vertex(p, x0, inv_mass, vt[q, 0], tri, thickness, reach)
+    for q in range(ee.shape[0]):
+        e, g = ee[q, 0], ee[q, 1]
+        i, j, k, l = edges[e, 0], edges[e, 1], edges[g, 0], edges[g, 1]
+        push_edges(p, x0, inv_mass, i, j, k, l, thickness, reach)
 
 
 @njit(cache=True)
@@ -375,27 +704,28 @@ def _boxes_apart(p, a, b):
 
 
 @njit(cache=True)
-def _crossing_pairs(p, triangles, cell):
-    """Keys f * m + g (f < g) of the intersecting triangle pairs, with repeats."""
-    m = triangles.shape[0]
-    start, entries = build_hash(p, triangles, 0.0, cell)
-    size = start.shape[0] - 1
-    found = [np.int64(0) for _ in range(0)]
-    for f in range(m):
-        lo, hi = _cell_range(p, triangles[f], 0.0, cell)
-        for ix in range(lo[0], hi[0] + 1):
-            for iy in range(lo[1], hi[1] + 1):
-                for iz in range(lo[2], hi[2] + 1):
-                    k = _bucket(ix, iy, iz, size)
-                    for j in range(start[k], start[k + 1]):
-                        g = entries[j]
-                        if g <= f or _share_vertex(triangles[f], triangles[g]):
-                            continue
-                        if _boxes_apart(p, triangles[f], triangles[g]):
-                            continue
-                        if triangles_cross(p, triangles[f], triangles[g]):
-                            found.append(f * m + g)
-    return np.array(found, dtype=np.int64)
+def _crossing_count(sc, p, fit):
+    """The intersecting triangle pairs (module docstring) over the leaf pairs of
+    :func:`leaf_pairs` with the exact 90-degree cones: each pair of triangles lies in one
+    leaf pair, so each is counted once."""
+    tree, triangles = sc.tree, sc.triangles
+    refit(tree, triangles, p, fit)
+    pairs, found = leaf_pairs(tree, triangles, fit, _COS_CROSSING, 0.0)
+    count = 0
+    for q in range(found):
+        a, b = pairs[q, 0], pairs[q, 1]
+        for j in range(tree.first[a], tree.first[a] + tree.count[a]):
+            f = tree.order[j]
+            start = j + 1 if a == b else tree.first[b]
+            for jj in range(start, tree.first[b] + tree.count[b]):
+                g = tree.order[jj]
+                if _share_vertex(triangles[f], triangles[g]):
+                    continue
+                if _boxes_apart(p, triangles[f], triangles[g]):
+                    continue
+                if triangles_cross(p, triangles[f], triangles[g]):
+                    count += 1
+    return count
 
 
 def self_intersections(sc: SelfContact, positions) -> int:
@@ -404,4 +734,4 @@ def self_intersections(sc: SelfContact, positions) -> int:
     if sc.triangles.shape[0] < 2:
         return 0
     x = np.ascontiguousarray(positions, dtype=np.float64)
-    return int(np.unique(_crossing_pairs(x, sc.triangles, sc.cell)).size)
+    return int(_crossing_count(sc, x, tree_fit(sc, x.shape[0])))

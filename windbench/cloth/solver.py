@@ -50,7 +50,13 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from windbench.cloth.collision import body_boxes, contact_vertex, follow_track, max_penetration
+from windbench.cloth.collision import (
+    body_boxes,
+    contact_vertex,
+    follow_track,
+    max_penetration,
+    near_a_body,
+)
 from windbench.cloth.constraints import (
     LIMIT_SLACK,
     damp_velocities,
@@ -66,9 +72,11 @@ from windbench.cloth.edge_contact import surface_boxes, surface_contacts, surfac
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.self_contact import (
     SelfContact,
+    TreeFit,
     self_contact_model,
     self_contacts,
     self_intersections,
+    tree_fit,
 )
 from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
@@ -180,13 +188,13 @@ def _contacts(contacts, inv_mass, p, xp, normal, clear):
     """Step 3: every free vertex that may touch a body moved out to the margin
     (:func:`~windbench.cloth.collision.contact_vertex`, friction against its motion from
     xp; ``normal`` (3,) work space, ``clear`` the clearances)."""
-    for i in range(p.shape[0]):
-        if inv_mass[i] > 0.0:
+    for i in range(p.shape[0]):  # the box test in scalars first: no array views
+        if inv_mass[i] > 0.0 and near_a_body(contacts.boxes, p[i, 0], p[i, 1], p[i, 2]):
             contact_vertex(contacts, i, xp[i], p[i], normal, clear)
 
 
 @njit(cache=True)
-def _all_contacts(model, p, xp, normal, clear):
+def _all_contacts(model, p, xp, normal, clear, fit):
     """Step 3: the cloth's edges and triangles
     (:func:`~windbench.cloth.edge_contact.surface_contacts`) and its vertices
     (:func:`_contacts`) against the bodies, then the cloth against itself and the other
@@ -199,7 +207,7 @@ def _all_contacts(model, p, xp, normal, clear):
         surface_contacts(model.surface, c.inv_mass, c.edges, model.self_contact.triangles, p, clear)
         _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
     if model.self_contact.on:
-        self_contacts(model.self_contact, c.edges, c.inv_mass, p, xp)
+        self_contacts(model.self_contact, c.inv_mass, p, xp, fit)
 
 
 @njit(cache=True)
@@ -208,7 +216,7 @@ def _contacts_moved(contacts, inv_mass, p, xp, normal, clear, moved):
     for i in range(p.shape[0]):
         if moved[i]:
             moved[i] = False
-            if inv_mass[i] > 0.0:
+            if inv_mass[i] > 0.0 and near_a_body(contacts.boxes, p[i, 0], p[i, 1], p[i, 2]):
                 contact_vertex(contacts, i, xp[i], p[i], normal, clear)
 
 
@@ -228,7 +236,7 @@ def _strain_limit(model, frame, p, xp, work, normal):
     where the wind presses it on the body its largest stretch stays above the limit, by as
     much as ``max_stretch`` and ``over_strain_limit`` (:meth:`XPBDCloth.stretch`) record."""
     c, s = model.constraints, model.settings
-    _, lam, chain_work, moved, clear, stamps = work
+    _, lam, chain_work, moved, clear, stamps, _ = work
     stamps[1][:] = -1  # every edge is tested in the first pass
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     ptr = c.chain_ptr[: c.n_lattice_chains + 1]
@@ -283,15 +291,16 @@ def _frame_figures(c, f_ext, x, p, v):
 def xpbd_frame(model, frame, x, v, f_ext, out, work):
     """One frame of ``substeps`` XPBD substeps (module docstring, steps 1-5).
 
-    Inputs x, v, f_ext (n, 3); outputs ``out`` = (x_out, v_out); ``work`` = (x scratch
-    (n, 3), multipliers (E,), chain scratch (S, 5)). Returns (W, K, finite) of
+    Inputs x, v, f_ext (n, 3); outputs ``out`` = (x_out, v_out); ``work`` = the
+    :class:`Workspace` arrays in field order (x scratch (n, 3), multipliers (E,), chain
+    scratch (S, 5), strain-limit flags, contact clearances, strain-limit clocks, patch fit). Returns (W, K, finite) of
     :func:`_frame_figures` for the new state.
     """
     c, s = model.constraints, model.settings
     h = frame.dt / s.substeps
     inv_h = 1.0 / h
     p, vv = out
-    xp, lam, chain_work, _, clear, _ = work
+    xp, lam, chain_work, _, clear, _, fit = work
     xp[:] = x
     vv[:] = v
     normal = np.empty(3)
@@ -305,7 +314,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
         if (sub + 1) % frame.bend_every == 0:  # 2b. soft bending: every bend_every-th
             project_hinges(p, c.inv_mass, c.hinges, c.hinge_rest, frame.hinge_alpha)
         project_tethers(p, c.inv_mass, c.tether_anchor, c.tether_length)  # 2c.
-        _all_contacts(model, p, xp, normal, clear)  # 3.
+        _all_contacts(model, p, xp, normal, clear, fit)  # 3.
         _strain_limit(model, frame, p, xp, work, normal)  # 3b.
         for i in range(x.shape[0]):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
@@ -568,6 +577,7 @@ class Workspace:
     moved: np.ndarray  # (n,) bool: vertices the edge-by-edge strain limit moved
     clear: tuple  # contact clearances: probe (n, 3), clearance (n,)
     stamps: tuple  # the strain limit's clocks (limit_edges): per vertex, per edge, clock (1,)
+    fit: TreeFit  # the self-contacts' patch boxes and cones
     frame: FrameConstants | None = None
 
 
@@ -639,6 +649,7 @@ class XPBDCloth:
                 np.full(n_e, -1, np.int64),
                 np.zeros(1, np.int64),
             ),
+            tree_fit(self.tables.self_contact, model.n_vertices),
         )
 
     def frame_constants(self, dt: float) -> FrameConstants:
@@ -662,7 +673,13 @@ class XPBDCloth:
         out = (np.empty_like(x), np.empty_like(v))
         w = self.workspace
         work, energy, finite = xpbd_frame(
-            self.tables, frame, x, v, f, out, (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps)
+            self.tables,
+            frame,
+            x,
+            v,
+            f,
+            out,
+            (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps, w.fit),
         )
         frames = state.frames + 1
         if not finite:
@@ -692,7 +709,8 @@ class XPBDCloth:
         x = np.ascontiguousarray(positions, dtype=np.float64)
         p, clear = x.copy(), tuple(a.copy() for a in self.workspace.clear)
         start = time.perf_counter()
-        _all_contacts(self.tables, p, x, np.empty(3), clear)
+        fit = tree_fit(self.tables.self_contact, x.shape[0])
+        _all_contacts(self.tables, p, x, np.empty(3), clear, fit)
         held = (time.perf_counter() - start) * self.settings.substeps
         self._contact_timing = (calls + 1, held)
         return held
