@@ -16,6 +16,7 @@ from windbench.cloth.self_contact import (
     LEAF,
     leaf_pairs,
     patch_tree,
+    push_edges,
     refit,
     self_contact_model,
     self_intersections,
@@ -252,3 +253,21 @@ def test_the_patch_hierarchy_partitions_the_triangles_and_knows_separate_pieces(
     assert tree.count[leaves].max() <= LEAF
     assert not tree.connected[0]
     assert tree.connected[tree.left[0]] and tree.connected[tree.right[0]]
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_two_crossing_edges_are_pushed_to_the_thickness_with_momentum_kept(side):
+    """Edge x = 0..1 at z = 0 and edge y = -0.5..0.5 at x = 0.3, z = 1 mm, which started on
+    the given side (z = side x 1 cm): afterwards their closest points are ``thickness``
+    apart on that side along n = e1 x e2 (the z axis), and sum_i m_i dx_i = 0 (equal
+    masses: the weights 1 - s, s, -(1 - u), -u sum to 0)."""
+    p = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.3, -0.5, 0.001], [0.3, 0.5, 0.001]])
+    xp = p.copy()
+    xp[2:, 2] = side * 0.01
+    inv_mass = np.ones(4)
+    before = p.copy()
+    c = push_edges(p, xp, inv_mass, 0, 1, 2, 3, 0.005, 0.02)
+    assert c < 0.0
+    gap = p[2:, 2].mean() - (0.7 * p[0, 2] + 0.3 * p[1, 2])  # closest points: s = 0.3, u = 0.5
+    assert gap == pytest.approx(side * 0.005, abs=1e-12)
+    np.testing.assert_allclose((p - before).sum(axis=0), 0.0, atol=1e-15)

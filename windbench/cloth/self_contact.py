@@ -495,35 +495,37 @@ def push_edges(p, xp, inv_mass, i, j, k, l, thickness, reach):
     """The edge-edge contact of edges i-j and k-l closer than ``reach``: their closest
     points q1, q2 (both inside the edges) kept ``thickness`` apart along n = e1 x e2 on the
     side they lay on at ``xp``: C = s (q1 - q2) . n - thickness, the four vertices moved
-    with their barycentric weights and inverse masses. Returns C (0 when they do not
-    touch)."""
+    with their barycentric weights w = (1 - s, s, -(1 - u), -u) and inverse masses.
+    Returns C (0 when they do not touch). Scalars only: it runs for every close pair."""
     s, u, gap2 = _segment_parameters(p, i, j, k, l)
     if s <= 0.0 or s >= 1.0 or u <= 0.0 or u >= 1.0 or gap2 >= reach * reach:
         return 0.0  # apart, or nearest at an end point: the vertex-triangle contacts' business
-    n = np.cross(p[j] - p[i], p[l] - p[k])
-    norm = np.sqrt(np.dot(n, n))
+    ax, ay, az = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+    bx, by, bz = p[l, 0] - p[k, 0], p[l, 1] - p[k, 1], p[l, 2] - p[k, 2]
+    nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
     if norm == 0.0:
         return 0.0
-    n /= norm
-    gap = (1.0 - s) * p[i] + s * p[j] - (1.0 - u) * p[k] - u * p[l]
-    dist = np.dot(gap, n)
-    if abs(dist) >= reach or np.dot(gap, gap) >= reach * reach:
+    nx, ny, nz = nx / norm, ny / norm, nz / norm
+    w0, w1, w2, w3 = 1.0 - s, s, -(1.0 - u), -u
+    dist = before = 0.0
+    for x, y in ((nx, 0), (ny, 1), (nz, 2)):
+        dist += x * (w0 * p[i, y] + w1 * p[j, y] + w2 * p[k, y] + w3 * p[l, y])
+        before += x * (w0 * xp[i, y] + w1 * xp[j, y] + w2 * xp[k, y] + w3 * xp[l, y])
+    if abs(dist) >= reach:
         return 0.0
-    before = (1.0 - s) * xp[i] + s * xp[j] - (1.0 - u) * xp[k] - u * xp[l]
-    side = np.dot(before, n)
-    sgn = 1.0 if (side if side != 0.0 else dist) >= 0.0 else -1.0
+    sgn = 1.0 if (before if before != 0.0 else dist) >= 0.0 else -1.0
     c = sgn * dist - thickness
-    w = np.array([(1.0 - s), s, -(1.0 - u), -u])
-    ids = np.array([i, j, k, l])
-    den = 0.0
-    for a in range(4):
-        den += w[a] * w[a] * inv_mass[ids[a]]
+    den = w0 * w0 * inv_mass[i] + w1 * w1 * inv_mass[j] + w2 * w2 * inv_mass[k]
+    den += w3 * w3 * inv_mass[l]
     if c >= 0.0 or den <= 0.0:
         return 0.0
     g = -c * sgn / den
-    for a in range(4):
-        for b in range(3):
-            p[ids[a], b] += g * w[a] * inv_mass[ids[a]] * n[b]
+    for y, n in ((0, nx), (1, ny), (2, nz)):
+        p[i, y] += g * w0 * inv_mass[i] * n
+        p[j, y] += g * w1 * inv_mass[j] * n
+        p[k, y] += g * w2 * inv_mass[k] * n
+        p[l, y] += g * w3 * inv_mass[l] * n
     return c
 
 
