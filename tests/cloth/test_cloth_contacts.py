@@ -271,3 +271,10 @@ def test_two_crossing_edges_are_pushed_to_the_thickness_with_momentum_kept(side)
     gap = p[2:, 2].mean() - (0.7 * p[0, 2] + 0.3 * p[1, 2])  # closest points: s = 0.3, u = 0.5
     assert gap == pytest.approx(side * 0.005, abs=1e-12)
     np.testing.assert_allclose((p - before).sum(axis=0), 0.0, atol=1e-15)
+
+
+def test_a_scene_without_cloth_has_an_empty_patch_tree():
+    """No triangles (a scene of bodies and wind only): one empty leaf, no intersections."""
+    sc = self_contact_model(np.zeros((0, 3)), np.zeros((0, 3), int), True, 0.005)
+    assert sc.tree.first.shape == (1,) and sc.tree.count[0] == 0
+    assert self_intersections(sc, np.zeros((0, 3))) == 0

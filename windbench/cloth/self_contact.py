@@ -145,13 +145,14 @@ def patch_tree(rest, triangles) -> PatchTree:
     order = np.arange(m, dtype=np.int64)
     nodes: list[list[int]] = []
     depth = _split(rest[tri].mean(axis=1), order, 0, m, nodes, 0) if m else 0
+    nodes = nodes or [[0, 0, -1, -1]]  # no cloth: one empty leaf
     first, count, left, right = (np.array(col, np.int64) for col in zip(*nodes, strict=True))
     connected = np.zeros(len(nodes), np.bool_)
     verts, edges = [], []
     for k in range(len(nodes) - 1, -1, -1):
         own = tri[order[first[k] : first[k] + count[k]]]
         if left[k] < 0:
-            connected[k] = _one_piece(own)
+            connected[k] = own.shape[0] == 0 or _one_piece(own)
             verts.append(np.unique(own))
             pairs = np.sort(own[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
             edges.append(np.unique(pairs, axis=0))
