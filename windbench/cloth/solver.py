@@ -199,14 +199,14 @@ def _all_contacts(model, p, xp, normal, clear, fit):
     (:func:`~windbench.cloth.edge_contact.surface_contacts`) and its vertices
     (:func:`_contacts`) against the bodies, then the cloth against itself and the other
     cloths (:func:`~windbench.cloth.self_contact.self_contacts`, with
-    ``cloth.self_collision``): a layer pressed onto a body by another is pushed back by
+    ``cloth.self_collision``, whose patch fit ``fit`` is None otherwise): a layer pressed onto a body by another is pushed back by
     the body first, so that the self-contact then lifts the upper layer (which moves it
     into the body's margin by at most the thickness, until the next contact pass)."""
     c = model.constraints
     if model.contacts.bodies.kinds.shape[0] > 0:
         surface_contacts(model.surface, c.inv_mass, c.edges, model.self_contact.triangles, p, clear)
         _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
-    if model.self_contact.on:
+    if fit is not None:  # None without cloth.self_collision: the branch is not compiled
         self_contacts(model.self_contact, c.inv_mass, p, xp, fit)
 
 
@@ -577,7 +577,7 @@ class Workspace:
     moved: np.ndarray  # (n,) bool: vertices the edge-by-edge strain limit moved
     clear: tuple  # contact clearances: probe (n, 3), clearance (n,)
     stamps: tuple  # the strain limit's clocks (limit_edges): per vertex, per edge, clock (1,)
-    fit: TreeFit  # the self-contacts' patch boxes and cones
+    fit: TreeFit | None  # the self-contacts' patch boxes and cones (None: self-collision off)
     frame: FrameConstants | None = None
 
 
@@ -649,7 +649,7 @@ class XPBDCloth:
                 np.full(n_e, -1, np.int64),
                 np.zeros(1, np.int64),
             ),
-            tree_fit(self.tables.self_contact, model.n_vertices),
+            tree_fit(self.tables.self_contact, model.n_vertices) if s.self_collision else None,
         )
 
     def frame_constants(self, dt: float) -> FrameConstants:
@@ -709,8 +709,7 @@ class XPBDCloth:
         x = np.ascontiguousarray(positions, dtype=np.float64)
         p, clear = x.copy(), tuple(a.copy() for a in self.workspace.clear)
         start = time.perf_counter()
-        fit = tree_fit(self.tables.self_contact, x.shape[0])
-        _all_contacts(self.tables, p, x, np.empty(3), clear, fit)
+        _all_contacts(self.tables, p, x, np.empty(3), clear, self.workspace.fit)
         held = (time.perf_counter() - start) * self.settings.substeps
         self._contact_timing = (calls + 1, held)
         return held
