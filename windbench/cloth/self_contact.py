@@ -28,15 +28,18 @@ axis and cannot meet itself (Volino and Magnenat-Thalmann 1994, "Efficient self-
 detection on smoothly discretized surface animations using geometrical shape regularity";
 Provot 1997 uses the same cones for cloth). Their second condition, that the patch's
 contour does not overlap itself in that projection, is not tested, as in most cloth
-solvers: a flat patch wound like a spiral ramp is missed. The contacts use a narrower cone,
-CONTACT_CONE: where the normals stay within it, two points of the patch within the reach of
-each other lie within reach / cos(CONTACT_CONE) of each other along the surface, a pair of
-neighbours that the thickness test would reject anyway; the intersection figure uses the
-exact 90 degrees. A flag that only ripples costs the refit and the top of the tree.
+solvers, so the contacts miss a flat patch that overlaps itself (a twist, a spiral ramp)
+until it stops being flat. They use a narrower cone, CONTACT_CONE: where the normals stay
+within it, two points of the patch within the reach of each other lie within
+reach / cos(CONTACT_CONE) of each other along the surface, a pair of neighbours that the
+thickness test would reject anyway. A flag that only ripples costs the refit and the top
+of the tree.
 
 The figure :func:`self_intersections` counts intersecting triangle pairs: two triangles
 without a common vertex of which an edge of one crosses the other (segment-triangle test,
-Moeller-Trumbore), through the same hierarchy.
+Moeller-Trumbore), through the same hierarchy with its boxes alone: a count must not miss
+the overlaps the cones cannot see (two adjacent patches within 90 degrees were seen to
+cross in a crumpled flag), so it equals an all-pairs search.
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ LEAF = 4  # triangles per leaf patch at most
 REACH = 4.0  # a vertex this many thicknesses behind a triangle is brought back
 CONTACT_CONE = math.radians(60.0)  # a patch is flat for the contacts below this half-angle
 _COS_CONTACT = math.cos(CONTACT_CONE)
-_COS_CROSSING = 0.0  # 90 degrees: exact for intersections (module docstring)
+_NEVER_FLAT = 2.0  # a cosine no cone reaches: boxes alone (the intersection figure)
 _WIDE = -2.0  # the cosine recorded for a cone of 90 degrees or more
 
 
@@ -709,11 +712,11 @@ def _boxes_apart(p, a, b):
 @njit(cache=True)
 def _crossing_count(sc, p, fit):
     """The intersecting triangle pairs (module docstring) over the leaf pairs of
-    :func:`leaf_pairs` with the exact 90-degree cones: each pair of triangles lies in one
-    leaf pair, so each is counted once."""
+    :func:`leaf_pairs` by their boxes alone: each pair of triangles lies in one leaf pair,
+    so each is counted once."""
     tree, triangles = sc.tree, sc.triangles
     refit(tree, triangles, p, fit)
-    pairs, found = leaf_pairs(tree, triangles, fit, _COS_CROSSING, 0.0)
+    pairs, found = leaf_pairs(tree, triangles, fit, _NEVER_FLAT, 0.0)
     count = 0
     for q in range(found):
         a, b = pairs[q, 0], pairs[q, 1]
