@@ -19,27 +19,24 @@ closest points (:func:`push_edges`, n = e1 x e2).
 
 Broad phase (:func:`leaf_pairs`): a fixed hierarchy of triangle patches
 (:func:`patch_tree`: median splits of the rest-pose centroids, leaves of at most LEAF
-triangles), whose boxes and normal cones are refitted to the current positions every
-substep (:func:`refit`). A patch is tested against itself only when it is not flat, and two
-patches only when their boxes come within the contact reach and they are not one flat
-patch together. Flat means a connected patch whose normals lie within a cone of half-angle
-below 90 degrees: such a surface is a height field over the plane normal to the cone's
-axis and cannot meet itself (Volino and Magnenat-Thalmann 1994, "Efficient self-collision
-detection on smoothly discretized surface animations using geometrical shape regularity";
-Provot 1997 uses the same cones for cloth). Their second condition, that the patch's
-contour does not overlap itself in that projection, is not tested, as in most cloth
-solvers, so the contacts miss a flat patch that overlaps itself (a twist, a spiral ramp)
-until it stops being flat. They use a narrower cone, CONTACT_CONE: where the normals stay
-within it, two points of the patch within the reach of each other lie within
-reach / cos(CONTACT_CONE) of each other along the surface, a pair of neighbours that the
-thickness test would reject anyway. A flag that only ripples costs the refit and the top
-of the tree.
+triangles) whose boxes and normal cones are refitted every substep (:func:`refit`). A
+patch is tested against itself only when it is not flat, two patches only when their boxes
+come within the reach and they are not one flat patch together. Flat: a connected patch
+whose normals lie within a cone below 90 degrees is a height field over the plane normal
+to the cone's axis and cannot meet itself (Volino and Magnenat-Thalmann 1994; Provot 1997
+uses the same cones for cloth). Their second condition, that the patch's contour does not
+overlap itself in that projection, is not tested, as in most cloth solvers: the contacts
+miss a flat patch that overlaps itself (a twist, a spiral ramp) until it stops being flat.
+They use a narrower cone, CONTACT_CONE: within it, two points of the patch within the
+reach of each other lie within reach / cos(CONTACT_CONE) of each other along the surface,
+neighbours that the thickness test would reject anyway. A flag that only ripples costs the
+refit and the top of the tree.
 
 The figure :func:`self_intersections` counts intersecting triangle pairs: two triangles
 without a common vertex of which an edge of one crosses the other (segment-triangle test,
-Moeller-Trumbore), through the same hierarchy with its boxes alone: a count must not miss
-the overlaps the cones cannot see (two adjacent patches within 90 degrees were seen to
-cross in a crumpled flag), so it equals an all-pairs search.
+Moeller-Trumbore), through the same hierarchy by its boxes alone, so that it equals an
+all-pairs search (with the cones it missed two adjacent patches, within 90 degrees, that
+crossed in a crumpled flag).
 """
 
 from __future__ import annotations
