@@ -15,6 +15,7 @@ from windbench.cloth.model import ClothModel
 from windbench.cloth.self_contact import (
     LEAF,
     leaf_pairs,
+    pass_due,
     patch_tree,
     push_edges,
     refit,
@@ -278,3 +279,19 @@ def test_a_scene_without_cloth_has_an_empty_patch_tree():
     sc = self_contact_model(np.zeros((0, 3)), np.zeros((0, 3), int), True, 0.005)
     assert sc.tree.first.shape == (1,) and sc.tree.count[0] == 0
     assert self_intersections(sc, np.zeros((0, 3))) == 0
+
+
+def test_the_self_contact_pass_runs_when_a_crossing_could_leave_its_reach():
+    """Thickness 5 mm, REACH 4: the pass may wait while 2 (d + d_h) <= 3 thickness = 15 mm,
+    d the largest move since the last pass, d_h this substep's; it always runs in a frame's
+    last substep."""
+    anchor = np.zeros((3, 3))
+    xp = np.zeros((3, 3))
+    p = np.zeros((3, 3))
+    p[1, 2] = 0.003  # d = d_h = 3 mm: 12 mm
+    assert not pass_due(p, xp, anchor, 0.005, False)
+    assert pass_due(p, xp, anchor, 0.005, True)
+    p[1, 2] = 0.004  # 16 mm
+    assert pass_due(p, xp, anchor, 0.005, False)
+    xp[1, 2] = 0.004  # no move in this substep: d = 4 mm, d_h = 0: 8 mm
+    assert not pass_due(p, xp, anchor, 0.005, False)

@@ -93,6 +93,8 @@ class TreeFit(NamedTuple):
     stamp: np.ndarray  # (n,) vertex marks of the adjacency test
     clock: np.ndarray  # (1,) the last mark
     stack: np.ndarray  # (S, 2) node pairs still to visit
+    anchor: np.ndarray  # (n, 3) positions at the last pass (:func:`self_contact_substep`)
+    passes: np.ndarray  # (1,) passes in the current frame
 
 
 def _split(centroid, order, lo, hi, nodes, depth):
@@ -199,6 +201,8 @@ def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
         np.zeros(n_vertices, np.int64),
         np.zeros(1, np.int64),
         np.zeros((8 * (sc.tree.depth + 2), 2), np.int64),
+        np.zeros((n_vertices, 3)),
+        np.zeros(1, np.int64),
     )
 
 
@@ -650,6 +654,38 @@ def self_contacts(sc, inv_mass, p, x0, fit):
         e, g = ee[q, 0], ee[q, 1]
         i, j, k, l = edges[e, 0], edges[e, 1], edges[g, 0], edges[g, 1]
         push_edges(p, x0, inv_mass, i, j, k, l, thickness, reach)
+
+
+@njit(cache=True)
+def pass_due(p, xp, anchor, thickness, last):
+    """Whether :func:`self_contact_substep` must run the pass now: in the frame's ``last``
+    substep, or when the cloth may have moved so far since the pass at ``anchor`` that a
+    crossing would leave the reach before the next substep. Two points moving at most d
+    each since the pass are at most 2 d closer, so a crossing still lies within
+    2 d + thickness of the plane; the pass runs when 2 (d + d_h) would exceed
+    (REACH - 1) thickness, d = max_i |p_i - anchor_i|, d_h = max_i |p_i - xp_i| (this
+    substep's move, the estimate of the next one's)."""
+    if last:
+        return True
+    d2 = dh2 = 0.0
+    for i in range(p.shape[0]):
+        ax, ay, az = p[i, 0] - anchor[i, 0], p[i, 1] - anchor[i, 1], p[i, 2] - anchor[i, 2]
+        hx, hy, hz = p[i, 0] - xp[i, 0], p[i, 1] - xp[i, 1], p[i, 2] - xp[i, 2]
+        d2 = max(d2, ax * ax + ay * ay + az * az)
+        dh2 = max(dh2, hx * hx + hy * hy + hz * hz)
+    return 2.0 * (math.sqrt(d2) + math.sqrt(dh2)) > (REACH - 1.0) * thickness
+
+
+@njit(cache=True)
+def self_contact_substep(sc, inv_mass, p, xp, fit, last):
+    """The self-contacts of one substep: :func:`self_contacts` with the sides of the last
+    pass (``fit.anchor``, the frame's start for the first), when :func:`pass_due`. A slow
+    cloth (a shirt, a sheltered flag) runs it once or twice a frame, a flapping flag in
+    every substep."""
+    if pass_due(p, xp, fit.anchor, sc.thickness, last):
+        self_contacts(sc, inv_mass, p, fit.anchor, fit)
+        fit.anchor[:] = p
+        fit.passes[0] += 1
 
 
 @njit(cache=True)

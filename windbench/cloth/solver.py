@@ -74,6 +74,7 @@ from windbench.cloth.self_contact import (
     SelfContact,
     TreeFit,
     self_contact_model,
+    self_contact_substep,
     self_contacts,
     self_intersections,
     tree_fit,
@@ -194,12 +195,22 @@ def _contacts(contacts, inv_mass, p, xp, normal, clear):
 
 
 @njit(cache=True)
-def _all_contacts(model, p, xp, normal, clear, fit):
+def _frame_start(fit, x):
+    """The self-contacts' sides at the frame's start ``x`` and their pass count reset (an
+    argument: numba leaves the branch out for ``fit`` None)."""
+    if fit is not None:
+        fit.anchor[:] = x
+        fit.passes[0] = 0
+
+
+@njit(cache=True)
+def _all_contacts(model, p, xp, normal, clear, fit, last):
     """Step 3: the cloth's edges and triangles
     (:func:`~windbench.cloth.edge_contact.surface_contacts`) and its vertices
     (:func:`_contacts`) against the bodies, then the cloth against itself and the other
     cloths (:func:`~windbench.cloth.self_contact.self_contacts`, with
-    ``cloth.self_collision``, whose patch fit ``fit`` is None otherwise): a layer pressed onto a body by another is pushed back by
+    ``cloth.self_collision``, whose patch fit ``fit`` is None otherwise; in the frame's
+    ``last`` substep and whenever the cloth moved far enough since the last pass): a layer pressed onto a body by another is pushed back by
     the body first, so that the self-contact then lifts the upper layer (which moves it
     into the body's margin by at most the thickness, until the next contact pass)."""
     c = model.constraints
@@ -207,7 +218,7 @@ def _all_contacts(model, p, xp, normal, clear, fit):
         surface_contacts(model.surface, c.inv_mass, c.edges, model.self_contact.triangles, p, clear)
         _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
     if fit is not None:  # None without cloth.self_collision: the branch is not compiled
-        self_contacts(model.self_contact, c.inv_mass, p, xp, fit)
+        self_contact_substep(model.self_contact, c.inv_mass, p, xp, fit, last)
 
 
 @njit(cache=True)
@@ -304,6 +315,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     xp[:] = x
     vv[:] = v
     normal = np.empty(3)
+    _frame_start(fit, x)
     moving = np.any(model.contacts.bodies.params[:, MOVING] != 0.0)
     for sub in range(s.substeps):
         if moving:  # the bodies' poses at the substep's end (collision.follow_track)
@@ -314,7 +326,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
         if (sub + 1) % frame.bend_every == 0:  # 2b. soft bending: every bend_every-th
             project_hinges(p, c.inv_mass, c.hinges, c.hinge_rest, frame.hinge_alpha)
         project_tethers(p, c.inv_mass, c.tether_anchor, c.tether_length)  # 2c.
-        _all_contacts(model, p, xp, normal, clear, fit)  # 3.
+        _all_contacts(model, p, xp, normal, clear, fit, sub == s.substeps - 1)  # 3.
         _strain_limit(model, frame, p, xp, work, normal)  # 3b.
         for i in range(x.shape[0]):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
@@ -695,8 +707,9 @@ class XPBDCloth:
         return ClothState(out[0], out[1], frames, work_in)
 
     def contact_seconds(self, positions: np.ndarray) -> float:
-        """The contacts' share of a frame (wall s, an estimate): one pass of step 3
-        (:func:`_all_contacts`) on a copy of ``positions``, timed, times the substeps. The
+        """The contacts' share of a frame (wall s, an estimate): one pass of step 3 on a copy
+        of ``positions``, timed, the body contacts (:func:`_all_contacts`) times the
+        substeps and the self-contacts times the passes of the last frame. The
         frame kernel carries no clock, so the figures call this apart from the step; to
         keep the estimate from costing a pass every frame it is re-measured every
         CONTACT_TIMING_EVERY calls and held in between."""
@@ -709,8 +722,13 @@ class XPBDCloth:
         x = np.ascontiguousarray(positions, dtype=np.float64)
         p, clear = x.copy(), tuple(a.copy() for a in self.workspace.clear)
         start = time.perf_counter()
-        _all_contacts(self.tables, p, x, np.empty(3), clear, self.workspace.fit)
+        _all_contacts(self.tables, p, x, np.empty(3), clear, None, False)
         held = (time.perf_counter() - start) * self.settings.substeps
+        fit = self.workspace.fit
+        if fit is not None:
+            start = time.perf_counter()
+            self_contacts(self.tables.self_contact, self.tables.constraints.inv_mass, p, x, fit)
+            held += (time.perf_counter() - start) * int(fit.passes[0])
         self._contact_timing = (calls + 1, held)
         return held
 
