@@ -742,28 +742,63 @@ def _boxes_apart(p, a, b):
     return False
 
 
+@njit(cache=True, inline="always")
+def _one_side(p, f, g):
+    """Whether the corners of triangle ``g`` (a 3-tuple) all lie strictly on one side of
+    the plane of triangle ``f``: then the two cannot cross (exact, no tolerance)."""
+    a, b, c = f
+    e1x, e1y, e1z = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
+    e2x, e2y, e2z = p[c, 0] - p[a, 0], p[c, 1] - p[a, 1], p[c, 2] - p[a, 2]
+    nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    above = below = 0
+    for k in g:
+        d = (p[k, 0] - p[a, 0]) * nx + (p[k, 1] - p[a, 1]) * ny + (p[k, 2] - p[a, 2]) * nz
+        above += d > 0.0
+        below += d < 0.0
+    return above == 3 or below == 3
+
+
+@njit(cache=True)
+def _crossing_candidates(sc, p, pairs, found):
+    """(K, 2) triangle pairs of the leaf pairs ``pairs[:found]`` without a common vertex,
+    whose boxes meet and neither of which lies on one side of the other's plane, in a loop
+    of plain arrays and scalar tests (the segment tests come after it)."""
+    tree, triangles = sc.tree, sc.triangles
+    out = np.empty((64, 2), np.int64)
+    n = 0
+    for q in range(found):
+        a, b = pairs[q, 0], pairs[q, 1]
+        for j in range(tree.first[a], tree.first[a] + tree.count[a]):
+            f = tree.order[j]
+            tf = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
+            start = j + 1 if a == b else tree.first[b]
+            for jj in range(start, tree.first[b] + tree.count[b]):
+                g = tree.order[jj]
+                tg = (triangles[g, 0], triangles[g, 1], triangles[g, 2])
+                if _share_vertex(tf, tg) or _boxes_apart(p, tf, tg):
+                    continue
+                if _one_side(p, tf, tg) or _one_side(p, tg, tf):
+                    continue
+                if n == out.shape[0]:
+                    out = _grown(out)
+                out[n, 0], out[n, 1] = f, g
+                n += 1
+    return out[:n]
+
+
 @njit(cache=True)
 def _crossing_count(sc, p, fit):
     """The intersecting triangle pairs (module docstring) over the leaf pairs of
     :func:`leaf_pairs` by their boxes alone: each pair of triangles lies in one leaf pair,
     so each is counted once."""
-    tree, triangles = sc.tree, sc.triangles
-    refit(tree, triangles, p, fit)
-    pairs, found = leaf_pairs(tree, triangles, fit, _NEVER_FLAT, 0.0)
+    triangles = sc.triangles
+    refit(sc.tree, triangles, p, fit)
+    pairs, found = leaf_pairs(sc.tree, triangles, fit, _NEVER_FLAT, 0.0)
+    candidates = _crossing_candidates(sc, p, pairs, found)
     count = 0
-    for q in range(found):
-        a, b = pairs[q, 0], pairs[q, 1]
-        for j in range(tree.first[a], tree.first[a] + tree.count[a]):
-            f = tree.order[j]
-            start = j + 1 if a == b else tree.first[b]
-            for jj in range(start, tree.first[b] + tree.count[b]):
-                g = tree.order[jj]
-                if _share_vertex(triangles[f], triangles[g]):
-                    continue
-                if _boxes_apart(p, triangles[f], triangles[g]):
-                    continue
-                if triangles_cross(p, triangles[f], triangles[g]):
-                    count += 1
+    for q in range(candidates.shape[0]):
+        f, g = candidates[q, 0], candidates[q, 1]
+        count += triangles_cross(p, triangles[f], triangles[g])
     return count
 
 
