@@ -16,7 +16,6 @@ writes ``experiments/results/self_collision_scenes.csv``; ``--quick`` runs the
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # before numba is imported
@@ -26,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.bench_cloth import write_rows
 from windbench.cli import compose_config
 from windbench.dataset import run_dataset
 from windbench.simulate import Simulation, prepare
@@ -85,13 +85,7 @@ def main() -> None:
                     f"{r['self_intersections_max']:.0f} mean {r['self_intersections_mean']:.1f}, "
                     f"cloth {r['cloth_ms_median']:.2f} ms/step, run {r['run_wall_s']:.1f} s"
                 )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    with open(args.out, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: f"{v:.6g}" if isinstance(v, float) else v for k, v in row.items()})
-    print(f"wrote {args.out}")
+    write_rows(rows, args.out, args.out)
 
 
 if __name__ == "__main__":
