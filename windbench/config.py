@@ -178,7 +178,8 @@ class ClothConfig:
         False,
         "",
         "cloth keeps its thickness from itself and from other cloths (off by default: "
-        "it costs more than the flag's frame budget; the paper scenes' flags rarely fold)",
+        "it costs more than the flag's frame budget; without it a folding flag passes "
+        "through itself, which the self_intersections figure counts)",
     )
     thickness: float = setting(
         0.005, "m", "self-contact distance between a vertex and another triangle", gt=0
