@@ -297,10 +297,11 @@ def _refit_leaf(order, start, stop, triangles, p, normals, box, cone, k):
 
 
 @njit(cache=True, inline="always")
-def _boxes_near(box, a, b, gap):
-    """Whether the boxes of patches a and b come within ``gap`` of each other."""
+def _boxes_meet(box_a, a, box_b, b, gap):
+    """Whether box row a of ``box_a`` and row b of ``box_b`` (lower and upper corners) come
+    within ``gap`` of each other."""
     for k in range(3):
-        if box[a, 3 + k] + gap < box[b, k] or box[b, 3 + k] + gap < box[a, k]:
+        if box_a[a, 3 + k] + gap < box_b[b, k] or box_b[b, 3 + k] + gap < box_a[a, k]:
             return False
     return True
 
@@ -347,7 +348,7 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
                 top += 3
                 continue
         else:
-            if not _boxes_near(box, a, b, gap):
+            if not _boxes_meet(box, a, box, b, gap):
                 continue
             if (
                 connected[a]
@@ -363,10 +364,7 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
                 stack[top + 1, 0], stack[top + 1, 1] = right[big], other
                 top += 2
                 continue
-        if found == pairs.shape[0]:
-            pairs = _grown(pairs)
-        pairs[found, 0], pairs[found, 1] = a, b
-        found += 1
+        pairs, found = _append(pairs, found, a, b)
     return pairs, found
 
 
@@ -376,6 +374,15 @@ def _grown(rows):
     out = np.empty((2 * rows.shape[0], rows.shape[1]), rows.dtype)
     out[: rows.shape[0]] = rows
     return out
+
+
+@njit(cache=True, inline="always")
+def _append(rows, n, a, b):
+    """(rows, n + 1) with the pair (a, b) written at row n (``rows`` grown when full)."""
+    if n == rows.shape[0]:
+        rows = _grown(rows)
+    rows[n, 0], rows[n, 1] = a, b
+    return rows, n + 1
 
 
 @njit(cache=True, inline="always")
@@ -445,18 +452,6 @@ def push_vertex(p, xp, inv_mass, i, tri, thickness, reach):
         for k in range(3):
             p[tri[k], a] -= g * beta[k] * inv_mass[tri[k]] * n[a]
     return c
-
-
-@njit(cache=True, inline="always")
-def _apart(p, a, b, c, d, gap):
-    """Whether the boxes of the points {a, b} and {c, d} of ``p`` (d = c for a point) are
-    more than ``gap`` apart along an axis: the cheap rejection before an exact test."""
-    for k in range(3):
-        if max(p[a, k], p[b, k]) + gap < min(p[c, k], p[d, k]):
-            return True
-        if min(p[a, k], p[b, k]) - gap > max(p[c, k], p[d, k]):
-            return True
-    return False
 
 
 @njit(cache=True, inline="always")
@@ -549,15 +544,6 @@ def _outside_patch(p, box, k, i, gap):
 
 
 @njit(cache=True, inline="always")
-def _edge_outside_patch(p, box, k, i, j, gap):
-    """Whether the box of edge i-j lies outside the box of patch k grown by ``gap``."""
-    for a in range(3):
-        if max(p[i, a], p[j, a]) + gap < box[k, a] or min(p[i, a], p[j, a]) - gap > box[k, 3 + a]:
-            return True
-    return False
-
-
-@njit(cache=True, inline="always")
 def _vertex_near_triangle(p, i, tri, reach):
     """Whether vertex i lies within ``reach`` of the plane of ``tri`` and projects inside
     it: the part of :func:`push_vertex`'s test that does not need the start positions."""
@@ -571,13 +557,22 @@ def _vertex_near_triangle(p, i, tri, reach):
 
 
 @njit(cache=True, inline="always")
-def _edges_near(p, i, j, k, l, reach):
+def _edges_close(p, i, j, k, l, reach):
     """Whether edges i-j and k-l come within ``reach`` at points inside both (the first
     test of :func:`push_edges`)."""
-    if _apart(p, i, j, k, l, reach):
-        return False
     s, u, gap2 = _segment_parameters(p, i, j, k, l)
     return 0.0 < s < 1.0 and 0.0 < u < 1.0 and gap2 < reach * reach
+
+
+@njit(cache=True)
+def _edge_boxes(p, edges):
+    """(E, 6) the boxes of the edges (rows i, j) at ``p``: lower and upper corners."""
+    out = np.empty((edges.shape[0], 6))
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        for a in range(3):
+            out[e, a], out[e, 3 + a] = min(p[i, a], p[j, a]), max(p[i, a], p[j, a])
+    return out
 
 
 @njit(cache=True)
@@ -585,20 +580,23 @@ def close_pairs(sc, p, box, pairs, found, reach):
     """(vertex-triangle pairs (K, 2): vertex, triangle; edge pairs (L, 2): rows of
     ``leaf_edge``) that may touch at ``p`` within the leaf pairs ``pairs[:found]``:
     vertices within ``reach`` of a triangle's plane and projecting inside it, edges within
-    ``reach`` at inner points. Found in a loop of plain arrays and scalar tests, and
-    pushed apart after it (:func:`self_contacts`): a call inside the search loop would cost
+    ``reach`` at inner points. Found in loops of plain arrays and scalar tests, and pushed
+    apart after them (:func:`self_contacts`): a call inside a search loop would cost
     reference counts on every pass."""
+    return (
+        _close_vertices(sc, p, box, pairs, found, reach),
+        _close_edges(sc.tree, p, box, pairs, found, reach),
+    )
+
+
+@njit(cache=True)
+def _close_vertices(sc, p, box, pairs, found, reach):
+    """The vertex-triangle pairs of :func:`close_pairs`."""
     tree, triangles = sc.tree, sc.triangles
     order, first, count = tree.order, tree.first, tree.count
-    vert_ptr, leaf_vert, edge_ptr, edges = (
-        tree.vert_ptr,
-        tree.leaf_vert,
-        tree.edge_ptr,
-        tree.leaf_edge,
-    )
+    vert_ptr, leaf_vert = tree.vert_ptr, tree.leaf_vert
     vt = np.empty((64, 2), np.int64)
-    ee = np.empty((64, 2), np.int64)
-    n_vt = n_ee = 0
+    n_vt = 0
     for q in range(found):
         a, b = pairs[q, 0], pairs[q, 1]
         for side in range(1 if a == b else 2):
@@ -613,24 +611,32 @@ def close_pairs(sc, p, box, pairs, found, reach):
                     if _incident(tri, i) or _outside_box(p, tri, i, reach):
                         continue
                     if _vertex_near_triangle(p, i, tri, reach):
-                        if n_vt == vt.shape[0]:
-                            vt = _grown(vt)
-                        vt[n_vt, 0], vt[n_vt, 1] = i, f
-                        n_vt += 1
+                        vt, n_vt = _append(vt, n_vt, i, f)
+    return vt[:n_vt]
+
+
+@njit(cache=True)
+def _close_edges(tree, p, box, pairs, found, reach):
+    """The edge pairs of :func:`close_pairs`, their boxes computed once
+    (:func:`_edge_boxes`): an edge's box against the other patch's, then against each of
+    its edges', then the closest points."""
+    edge_ptr, edges = tree.edge_ptr, tree.leaf_edge
+    eb = _edge_boxes(p, edges)
+    ee = np.empty((64, 2), np.int64)
+    n_ee = 0
+    for q in range(found):
+        a, b = pairs[q, 0], pairs[q, 1]
         for e in range(edge_ptr[a], edge_ptr[a + 1]):
-            i, j = edges[e, 0], edges[e, 1]
-            if _edge_outside_patch(p, box, b, i, j, reach):
+            if not _boxes_meet(eb, e, box, b, reach):
                 continue
+            i, j = edges[e, 0], edges[e, 1]
             for g in range(e + 1 if a == b else edge_ptr[b], edge_ptr[b + 1]):
                 k, l = edges[g, 0], edges[g, 1]
-                if i == k or i == l or j == k or j == l:
+                if i == k or i == l or j == k or j == l or not _boxes_meet(eb, e, eb, g, reach):
                     continue
-                if _edges_near(p, i, j, k, l, reach):
-                    if n_ee == ee.shape[0]:
-                        ee = _grown(ee)
-                    ee[n_ee, 0], ee[n_ee, 1] = e, g
-                    n_ee += 1
-    return vt[:n_vt], ee[:n_ee]
+                if _edges_close(p, i, j, k, l, reach):
+                    ee, n_ee = _append(ee, n_ee, e, g)
+    return ee[:n_ee]
 
 
 @njit(cache=True)
@@ -779,10 +785,7 @@ def _crossing_candidates(sc, p, pairs, found):
                     continue
                 if _one_side(p, tf, tg) or _one_side(p, tg, tf):
                     continue
-                if n == out.shape[0]:
-                    out = _grown(out)
-                out[n, 0], out[n, 1] = f, g
-                n += 1
+                out, n = _append(out, n, f, g)
     return out[:n]
 
 
