@@ -85,7 +85,8 @@ class SelfContact(NamedTuple):
 
 
 class TreeFit(NamedTuple):
-    """What :func:`refit` computes for the current positions, and the traversal's scratch."""
+    """What :func:`refit` computes for the current positions, the traversal's scratch, and
+    what the pass keeps between substeps (the positions at its last run, its count)."""
 
     normals: np.ndarray  # (m, 3) area-weighted normals 2 A n of the triangles
     box: np.ndarray  # (N, 6) lower and upper corners of each patch's box
