@@ -208,11 +208,12 @@ def _all_contacts(model, p, xp, normal, clear, fit, last):
     """Step 3: the cloth's edges and triangles
     (:func:`~windbench.cloth.edge_contact.surface_contacts`) and its vertices
     (:func:`_contacts`) against the bodies, then the cloth against itself and the other
-    cloths (:func:`~windbench.cloth.self_contact.self_contacts`, with
-    ``cloth.self_collision``, whose patch fit ``fit`` is None otherwise; in the frame's
-    ``last`` substep and whenever the cloth moved far enough since the last pass): a layer pressed onto a body by another is pushed back by
-    the body first, so that the self-contact then lifts the upper layer (which moves it
-    into the body's margin by at most the thickness, until the next contact pass)."""
+    cloths (:func:`~windbench.cloth.self_contact.self_contact_substep`, with
+    ``cloth.self_collision``, whose patch fit ``fit`` is None otherwise: in the frame's
+    ``last`` substep and whenever the cloth moved far enough since the last pass). A layer
+    pressed onto a body by another is pushed back by the body first, so that the
+    self-contact then lifts the upper layer (which moves it into the body's margin by at
+    most the thickness, until the next contact pass)."""
     c = model.constraints
     if model.contacts.bodies.kinds.shape[0] > 0:
         surface_contacts(model.surface, c.inv_mass, c.edges, model.self_contact.triangles, p, clear)
@@ -304,8 +305,8 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
 
     Inputs x, v, f_ext (n, 3); outputs ``out`` = (x_out, v_out); ``work`` = the
     :class:`Workspace` arrays in field order (x scratch (n, 3), multipliers (E,), chain
-    scratch (S, 5), strain-limit flags, contact clearances, strain-limit clocks, patch fit). Returns (W, K, finite) of
-    :func:`_frame_figures` for the new state.
+    scratch (S, 5), strain-limit flags, contact clearances, strain-limit clocks, patch
+    fit). Returns (W, K, finite) of :func:`_frame_figures` for the new state.
     """
     c, s = model.constraints, model.settings
     h = frame.dt / s.substeps
