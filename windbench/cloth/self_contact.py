@@ -76,9 +76,9 @@ class PatchTree(NamedTuple):
 
 
 class SelfContact(NamedTuple):
-    """The fixed tables of the self-contact pass."""
+    """The fixed tables of the self-contact pass (built with or without
+    ``cloth.self_collision``: the intersection figure reads them too)."""
 
-    on: bool  # cloth.self_collision
     triangles: np.ndarray  # (m, 3) global vertex ids, every cloth
     thickness: float  # m
     tree: PatchTree
@@ -185,11 +185,11 @@ def patch_tree(rest, triangles) -> PatchTree:
     )
 
 
-def self_contact_model(rest, triangles, on: bool, thickness: float) -> SelfContact:
+def self_contact_model(rest, triangles, thickness: float) -> SelfContact:
     """:class:`SelfContact` with the patch hierarchy of the rest positions."""
     tri = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     rest = np.asarray(rest, np.float64)
-    return SelfContact(bool(on), tri, float(thickness), patch_tree(rest, tri))
+    return SelfContact(tri, float(thickness), patch_tree(rest, tri))
 
 
 def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:

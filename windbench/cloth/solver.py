@@ -640,9 +640,7 @@ class XPBDCloth:
             constraint_tables(model, self.topology, k, s),
             contacts,
             Settings(s.substeps, s.edge_iterations, s.strain_limit, s.limit_passes),
-            self_contact_model(
-                model.rest_positions, model.triangles, s.self_collision, s.thickness
-            ),
+            self_contact_model(model.rest_positions, model.triangles, s.thickness),
             contacts._replace(
                 boxes=surface_boxes(contacts.bodies, contacts.boxes, rest, triangles)
             ),
@@ -714,7 +712,7 @@ class XPBDCloth:
         frame kernel carries no clock, so the figures call this apart from the step; to
         keep the estimate from costing a pass every frame it is re-measured every
         CONTACT_TIMING_EVERY calls and held in between."""
-        if not (self.tables.self_contact.on or self.tables.contacts.bodies.kinds.shape[0]):
+        if self.workspace.fit is None and not self.tables.contacts.bodies.kinds.shape[0]:
             return 0.0
         calls, held = self._contact_timing
         self._contact_timing = (calls + 1, held)
