@@ -16,6 +16,7 @@ from windbench.errors import ConfigError
 from windbench.geometry.bodies import distances
 from windbench.simulate import run
 from windbench.wind.base import Obstacles
+from windbench.wind.navier_stokes import threads as versions
 
 FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
 NO_OBSTACLES = Obstacles.rigid_only(())
@@ -240,28 +241,47 @@ def test_cloth_sheet_shelters_with_projection_coupling(mode):
         assert speed < 2.0
 
 
-def test_same_input_same_numbers_bit_for_bit():
+@pytest.mark.parametrize(
+    "params",
+    [
+        dict(advection="maccormack", turbulence="smagorinsky", coupling="projection"),
+        dict(advection="second_order", turbulence="mixing_length", coupling="paper"),
+    ],
+)
+def test_same_input_same_numbers_bit_for_bit(monkeypatch, params):
     """Twice on all threads and once on one thread: the same bits (every sum of the
-    solver is taken in an order that does not depend on the threads)."""
+    solver is taken in an order that does not depend on the threads). With the threshold
+    of threads.py at 0 cells, all threads run the kernels' parallel versions and one
+    thread their serial versions: those agree bit for bit too (the two cases between them
+    run every kernel that has two versions)."""
+    monkeypatch.setattr(versions, "PARALLEL_CELLS", 0)
     boundary, sources, bodies, _ = CASES["inflow_outflow_body"]
     runs = []
     all_threads = numba.get_num_threads()
     try:
-        for threads in (all_threads, 1, all_threads):
-            numba.set_num_threads(threads)
-            wind = make(
-                box_scene(boundary, sources, bodies),
-                12,
-                advection="maccormack",
-                coupling="projection",
-            )
+        for count in (all_threads, 1, all_threads):
+            numba.set_num_threads(count)
+            wind = make(box_scene(boundary, sources, bodies), 12, viscosity=0.1, **params)
             for _ in range(3):
                 wind.step(0.05, sheet_obstacles())
+            assert versions._Choice.parallel == (count > 1)
             runs.append(wind.velocity().copy())
     finally:
         numba.set_num_threads(all_threads)
     assert np.array_equal(runs[0], runs[2])
     assert np.array_equal(runs[0], runs[1])
+
+
+def test_kernels_run_serially_on_one_thread_or_a_small_grid():
+    all_threads = numba.get_num_threads()
+    try:
+        assert not versions.select(versions.PARALLEL_CELLS - 1)
+        assert versions.select(versions.PARALLEL_CELLS) == (all_threads > 1)
+        numba.set_num_threads(1)
+        assert not versions.select(10**9)
+    finally:
+        numba.set_num_threads(all_threads)
+        versions.select(0)
 
 
 def test_diffusion_stops_within_its_error_bound_of_the_exact_implicit_solve():

@@ -35,6 +35,7 @@ import numpy as np
 from numba import njit, prange
 
 from windbench.wind.navier_stokes.flags import FAST_MATH
+from windbench.wind.navier_stokes.threads import threaded
 
 ONE = np.uint64(1)  # index arithmetic on unsigned indices must stay unsigned
 # The face components' axes as int64 values: a literal 0, 1 or 2 would compile
@@ -316,7 +317,7 @@ def _advect_planes(u, v, w, cells, periodic, dt_h, src, out, qmin, qmax, bounds,
             )
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def advect(u, v, w, cells, periodic, dt_h, chunks, src, out, qmin, qmax, bounds):
     """out[a] = src[a](x - d) at every interior face of component a = 0, 1, 2 (tuples of
     the three padded arrays), d the RK2 backtrace displacement of the velocity (u, v, w)

@@ -59,6 +59,7 @@ from windbench.wind.navier_stokes import (
     boundaries,
     coupling,
     diffusion,
+    threads,
     trapezoid,
     turbulence,
 )
@@ -188,6 +189,7 @@ class NavierStokesWind(WindField):
     def __init__(self, scene, grid, params):
         _check(params)
         super().__init__(scene, grid, params)
+        threads.select(grid.n_cells)  # the kernels' versions (threads.py)
         self.advection = str(params.advection)
         self.coupling = str(params.coupling)
         self.viscosity = float(params.viscosity)
@@ -677,6 +679,7 @@ class NavierStokesWind(WindField):
 
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
+        threads.select(self.grid.n_cells)  # the thread count may have changed
         self.time += dt
         if self.times.varies:  # the inflow of this step's end
             self.planes = self._boundary_planes()

@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from windbench.wind.navier_stokes.flags import FAST_MATH
+from windbench.wind.navier_stokes.threads import threaded
 
 
 def error_bound_factor(alpha: float, active_axes: int) -> float:
@@ -61,7 +62,7 @@ def _plane(q, q0, I, colour, alpha, axes, free):
     return change
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def gauss_seidel_half(q, q0, colour, alpha, axes, free, changes):
     """One colour of a red-black sweep; ``changes[I]`` = largest update in plane I.
 
@@ -89,7 +90,7 @@ def _neighbour_sum(xm, xp, ym, yp, qc, K, axes, all_axes):
     return nb
 
 
-@njit(cache=True, parallel=True, fastmath=FAST_MATH)
+@threaded(fastmath=FAST_MATH)
 def jacobi_first_sweep(q0, out, alpha, axes, free, changes, peaks):
     """The first sweep from the guess q0 (the right-hand side itself), out of place:
     out = (q0 + alpha sum_nb q0) / (1 + 2 alpha d) on the free faces, out = q0 on every

@@ -41,6 +41,7 @@ from numba import njit, prange
 
 from windbench.wind.navier_stokes.coarse_levels import CoarseLevels
 from windbench.wind.navier_stokes.flags import FAST_MATH
+from windbench.wind.navier_stokes.threads import threaded
 
 SERIAL_CELLS = 32768  # levels with fewer cells run on one thread (:mod:`.coarse_levels`)
 PRE_SWEEPS = 2  # per level and direction
@@ -252,7 +253,7 @@ def _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, i, j, residual):
         oc[k] = (bc[k] if residual else 0.0) - sign * (d * xc[k] - s)
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def residual(x, b, level, out):
     """out = b - A x; returns out . out, summed as :func:`dot` does (in the same pass)."""
     partial = np.empty(x.shape[0])
@@ -262,7 +263,7 @@ def residual(x, b, level, out):
     return ordered_sum(partial)
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def apply_operator(x, level, out):
     """out = A x = sum_f c w_f (x_c - x_nb); returns x . A x, summed as :func:`dot` does
     (plane by plane while the plane is in cache: one pass less per CG iteration)."""
@@ -371,7 +372,7 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
                 xc[k] += omega * ((bc[k] + s) / d - xc[k])
 
 
-@njit(cache=True, parallel=True, fastmath=FAST_MATH)
+@threaded(fastmath=FAST_MATH)
 def gauss_seidel(x, b, level, colour, halves, r, partial):
     """``halves`` half sweeps of red-black SOR (the level's omega, coef[6]) on A x = b,
     alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first), planes
@@ -404,7 +405,7 @@ def gauss_seidel(x, b, level, colour, halves, r, partial):
     return ordered_sum(partial) if with_dot else 0.0
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def residual_restrict(x, b, level, ratio, coarse):
     """coarse[I,J,K] = mean of the residual b - A x over the fine cells it covers (ratio 1
     or 2 per axis). The residual of the fine planes under one coarse plane goes to a
@@ -439,7 +440,7 @@ def _restrict_plane(x, b, level, ratio, coarse, I):
             coarse[I, J, K] *= inv
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def prolong_add(coarse, ratio, fine):
     """fine += coarse value of the parent cell (injection; ratio 1 or 2 per axis)."""
     n0, n1, n2 = fine.shape
@@ -501,7 +502,7 @@ def _plane_dot(a, b, i):
     return acc
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def dot(a, b):
     """sum a b, by planes then over the planes in order (the same bits on any thread count)."""
     partial = np.empty(a.shape[0])
@@ -510,7 +511,7 @@ def dot(a, b):
     return ordered_sum(partial)
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def cg_update(alpha, p, q, x, r, r_low):
     """x += alpha p, r -= alpha q, r_low = r in r_low's precision (the next cycle's
     right-hand side, in the same pass); return r . r (by planes, thread-count independent).
@@ -530,7 +531,7 @@ def cg_update(alpha, p, q, x, r, r_low):
     return ordered_sum(partial)
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def xpby(x, beta, y):
     """y = x + beta y."""
     n0, n1, n2 = x.shape

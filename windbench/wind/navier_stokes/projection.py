@@ -19,6 +19,7 @@ from numba import njit, prange
 
 from windbench.wind.navier_stokes.boundaries import cells_beside
 from windbench.wind.navier_stokes.multigrid import ordered_sum
+from windbench.wind.navier_stokes.threads import threaded
 
 
 @njit(cache=True, inline="always")
@@ -34,7 +35,7 @@ def _outward_flux(u, v, w, i, j, k):
     )
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def face_flux(u, v, w, target, out):
     """out_c = h div u - target_c = sum of outward face velocities of cell c - target_c."""
     nx, ny, nz = out.shape
@@ -105,7 +106,7 @@ def psi_difference(psi, a, I, J, K, periodic):
     return plus - minus
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def subtract_gradient(q, a, psi, free, periodic):
     """q_f -= psi_+ - psi_- on the free faces of component a (the projection)."""
     P0, P1, P2 = q.shape

@@ -11,14 +11,15 @@ each one pass over a velocity component:
 
 from __future__ import annotations
 
-from numba import njit, prange
+from numba import prange
 
 from windbench.wind.navier_stokes.diffusion import _neighbour_sum
 from windbench.wind.navier_stokes.flags import FAST_MATH
 from windbench.wind.navier_stokes.projection import psi_difference
+from windbench.wind.navier_stokes.threads import threaded
 
 
-@njit(cache=True, parallel=True, fastmath=FAST_MATH)
+@threaded(fastmath=FAST_MATH)
 def carried_field(q, a, psi, scale, beta, axes, free, periodic, out):
     """out = q + beta sum_nb (q_nb - q) - scale (psi_+ - psi_-) on the free faces of
     component a, out = q on every other element (refill the ghosts afterwards); beta =
@@ -46,7 +47,7 @@ def carried_field(q, a, psi, scale, beta, axes, free, periodic, out):
                 oc[K] = value
 
 
-@njit(cache=True, parallel=True, fastmath=FAST_MATH)
+@threaded(fastmath=FAST_MATH)
 def midpoint_velocity(q, previous):
     """previous = 3/2 q - 1/2 previous (u^n+1/2 from u^n and u^n-1), in place, ghosts too."""
     P0, P1, P2 = q.shape

@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from windbench.wind.navier_stokes.boundaries import cells_beside
+from windbench.wind.navier_stokes.threads import threaded
 
 
 @njit(cache=True, inline="always")
@@ -41,7 +42,7 @@ def _centre(q, a, i, j, k):
 SUBSTEP_LIMIT = 0.9
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def eddy_viscosity(u, v, w, solid, axes, h, length2, out):
     """out = l^2 |S| per cell (m^2/s), l^2 = ``length2[k]`` of the cell's layer (the
     Smagorinsky closure: (C_s h)^2), 0 in solids. Derivatives along an inactive axis
@@ -93,7 +94,7 @@ def _face_nu(nu, I, J, K, a):
     return 0.5 * (plus + minus)
 
 
-@njit(cache=True, parallel=True)
+@threaded()
 def eddy_diffusion(q, a, nu, axes, dt_h2, free, out):
     """out = q + dt/h^2 sum_b [nu_+ (q_+b - q) - nu_- (q - q_-b)] on the free faces of
     component a (nu between two faces: the mean of theirs), out = q elsewhere."""

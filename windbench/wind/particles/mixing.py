@@ -46,6 +46,7 @@ from windbench.geometry.bodies import BOX
 from windbench.wind.particles.emission import emission_specs
 from windbench.wind.particles.tracing import (
     BODIES,
+    BODY_HIT,
     SOLID,
     TRIANGLES,
     _cross_face,
@@ -362,7 +363,7 @@ def nearest_hit(bodies, cloth, obstacles, cell, p, e, t0, t1, work):
                 best, body = sh, items[m]
                 work.normal[:] = work.body_normal
     if obstacles & TRIANGLES:
-        best, on_body = first_triangle_hit(cloth, cell, a, b, e, best, True, work.normal)
+        best, on_body = first_triangle_hit(cloth, cell, a, b, e, best, BODY_HIT, work.normal)
         body = body if on_body else -1
     return best, body
 

@@ -66,6 +66,9 @@ SOLID, BODIES, TRIANGLES = 1, 2, 4  # bits of the per-cell flags
 MARK_NONE, MARK_BODIES, MARK_ALL = 0, 1, 2  # which hits make the marks "deflected"
 MARK_MODES = {"none": MARK_NONE, "bodies": MARK_BODIES, "all": MARK_ALL}
 ROOT_ITERATIONS = 60
+# a body hit as a run-time boolean (np.bool_), not a constant: a literal True or False is
+# a type of its own, for which numba compiles :func:`first_triangle_hit` once more
+BODY_HIT, NO_BODY_HIT = np.bool_(True), np.bool_(False)
 AHEAD = 8  # particles between a particle's prefetch and its tracing
 RADIX_BITS = 11  # bits of the cell id sorted per pass of sort_by_cell
 RADIX = 1 << RADIX_BITS
@@ -595,7 +598,7 @@ def _piece_hit(bodies, cloth, flags, cell, p, e, span, work):
     a, b = ab[0], ab[1]
     t, t_exit = span
     best = 2.0
-    body_hit = False
+    body_hit = NO_BODY_HIT
     obstacles = flags & (BODIES | TRIANGLES)
     if obstacles:  # the piece a -> b lies in this cell: test what it registers
         a[0], a[1], a[2] = p[0] + t * e[0], p[1] + t * e[1], p[2] + t * e[2]
