@@ -249,39 +249,32 @@ def test_cloth_sheet_shelters_with_projection_coupling(mode):
     ],
 )
 def test_same_input_same_numbers_bit_for_bit(monkeypatch, params):
-    """Twice on all threads and once on one thread: the same bits (every sum of the
-    solver is taken in an order that does not depend on the threads). With the threshold
-    of threads.py at 0 cells, all threads run the kernels' parallel versions and one
-    thread their serial versions: those agree bit for bit too (the two cases between them
-    run every kernel that has two versions)."""
-    monkeypatch.setattr(versions, "PARALLEL_CELLS", 0)
+    """The kernels' parallel versions on all threads and on one thread, and their serial
+    versions (threads.py): the same bits (every sum of the solver is taken in an order
+    that does not depend on the threads). The two cases between them run every kernel
+    that has two versions."""
     boundary, sources, bodies, _ = CASES["inflow_outflow_body"]
     runs = []
     all_threads = numba.get_num_threads()
     try:
-        for count in (all_threads, 1, all_threads):
+        for count, parallel_cells in ((all_threads, 0), (1, 0), (all_threads, 10**12)):
             numba.set_num_threads(count)
+            monkeypatch.setattr(versions, "PARALLEL_CELLS", parallel_cells)
             wind = make(box_scene(boundary, sources, bodies), 12, viscosity=0.1, **params)
             for _ in range(3):
                 wind.step(0.05, sheet_obstacles())
-            assert versions._Choice.parallel == (count > 1)
+            assert versions._Choice.parallel == (parallel_cells == 0)
             runs.append(wind.velocity().copy())
     finally:
         numba.set_num_threads(all_threads)
-    assert np.array_equal(runs[0], runs[2])
     assert np.array_equal(runs[0], runs[1])
+    assert np.array_equal(runs[0], runs[2])
 
 
-def test_kernels_run_serially_on_one_thread_or_a_small_grid():
-    all_threads = numba.get_num_threads()
-    try:
-        assert not versions.select(versions.PARALLEL_CELLS - 1)
-        assert versions.select(versions.PARALLEL_CELLS) == (all_threads > 1)
-        numba.set_num_threads(1)
-        assert not versions.select(10**9)
-    finally:
-        numba.set_num_threads(all_threads)
-        versions.select(0)
+def test_grids_below_the_threshold_run_the_serial_kernels():
+    assert not versions.select(versions.PARALLEL_CELLS - 1)
+    assert versions.select(versions.PARALLEL_CELLS)
+    versions.select(0)
 
 
 def test_diffusion_stops_within_its_error_bound_of_the_exact_implicit_solve():

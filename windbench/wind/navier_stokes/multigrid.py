@@ -41,7 +41,7 @@ from numba import njit, prange
 
 from windbench.wind.navier_stokes.coarse_levels import CoarseLevels
 from windbench.wind.navier_stokes.flags import FAST_MATH
-from windbench.wind.navier_stokes.threads import threaded
+from windbench.wind.navier_stokes.threads import select, threaded
 
 SERIAL_CELLS = 32768  # levels with fewer cells run on one thread (:mod:`.coarse_levels`)
 PRE_SWEEPS = 2  # per level and direction
@@ -631,6 +631,7 @@ class MultigridPoisson:
     def __init__(self, shape, periodic, singular: bool, min_coarse: int = 4, dtype=np.float64):
         """``dtype``: CG's vectors r, p and A p (the solution x and the reductions stay in
         float64 whatever it is, see :func:`cg_update`)."""
+        select(int(np.prod(shape)))  # the kernels' versions for this grid (threads.py)
         self.periodic = np.asarray(periodic, dtype=np.bool_)
         self.singular = singular
         levels = [_Level(shape, np.ones(3), self.periodic, PRECONDITIONER_DTYPE, FINE_OMEGA)]

@@ -1,18 +1,26 @@
 """The Navier-Stokes kernels' two compiled versions: one that splits its ``prange`` loop
 over numba's threads, one that runs it as a plain loop; and the choice between them.
 
-Threads cost twice where they cannot pay off. numba's parallel version of a kernel takes
-3-5 times the compile time of the serial one (its loop analysis and threaded wrapper; one
-process, empty cache: ``subtract_gradient`` 3.0 against 0.64 CPU s, ``residual`` 3.4
-against 0.9), and on a small grid waking the other threads for every loop costs more than
-the loop (the 20-cell ``smoke`` scene, two threads: projection 8.1 ms per step against
-0.75 ms on one). A run uses the parallel versions only when it has more than one thread
-and its grid at least ``PARALLEL_CELLS`` cells (:func:`select`); a one-thread run, as
-every run of a parallel sweep on a small machine is, never compiles them.
+Threads cost twice on a small grid. numba's parallel version of a kernel takes 3-5 times
+the compile time of the serial one (its loop analysis and threaded wrapper; one process,
+empty cache: ``subtract_gradient`` 3.0 against 0.64 CPU s, ``residual`` 3.4 against 0.9),
+and waking the other threads (a passive wait, :mod:`windbench.runtime`) for each of the
+step's few hundred loops costs more than the second thread gains. A grid below
+``PARALLEL_CELLS`` cells runs the serial versions (:func:`select`), so the small runs of
+a first try, a test suite or a parallel sweep never compile the parallel ones; larger
+grids run the parallel versions on the run's threads. Measured per step, the two
+versions A/B in one process (``experiments/bench_kernel_versions.py``): on one thread
+the serial versions were 1-8 % slower (fence 16^3 to 64^3, two_flags_wall at 40 and 80
+cells); on two threads they were faster up to 32^3 (13.2 against 21.3 ms at 32^3), even
+at 48^3 and slower at 64^3 (76.6 against 59.5 ms). The serial versions are that fast
+only where their loops keep no array views or array-taking helpers in branchy code: there
+numba's reference counting stays in a plain loop (``subtract_gradient`` ran 33 times
+slower before its psi reads were written out, :func:`.projection.face_cells`).
 
 Both versions are compiled from the same source, each with its own cache entry (the
-serial one under the kernel's name with ``SERIAL_SUFFIX``), without fast-math flags
-(:mod:`.flags`), and every sum is taken in a fixed order: the same bits either way.
+serial one under the kernel's name with ``SERIAL_SUFFIX``), with the error model numba
+gives a parallel loop's body and without fast-math flags (:mod:`.flags`), and every sum
+is taken in a fixed order: the same bits either way.
 """
 
 from __future__ import annotations
@@ -20,10 +28,9 @@ from __future__ import annotations
 import functools
 import types
 
-import numba
 from numba import njit
 
-PARALLEL_CELLS = 32768  # cells of the smallest grid whose kernels run on threads
+PARALLEL_CELLS = 1 << 18  # cells of the smallest grid whose kernels run their parallel versions
 SERIAL_SUFFIX = "_serial"  # name suffix of the serial versions' cache entries
 
 
@@ -34,9 +41,9 @@ class _Choice:
 
 
 def select(cells: int) -> bool:
-    """Run the parallel versions from now on iff this thread has more than one numba
-    thread and the grid ``cells`` >= PARALLEL_CELLS; returns that choice."""
-    _Choice.parallel = numba.get_num_threads() > 1 and int(cells) >= PARALLEL_CELLS
+    """Run the parallel versions from now on iff the grid has ``cells`` >= PARALLEL_CELLS
+    cells; returns that choice."""
+    _Choice.parallel = int(cells) >= PARALLEL_CELLS
     return _Choice.parallel
 
 
@@ -57,7 +64,7 @@ class Kernel:
 
     def __init__(self, fn, options):
         self.parallel = njit(cache=True, parallel=True, **options)(fn)
-        self.serial = njit(cache=True, **options)(_renamed(fn, SERIAL_SUFFIX))
+        self.serial = njit(cache=True, error_model="numpy", **options)(_renamed(fn, SERIAL_SUFFIX))
         functools.update_wrapper(self, fn)
 
     def __call__(self, *args):
