@@ -584,6 +584,7 @@ class _Level:
 
     def __init__(self, shape, coef, periodic, dtype=np.float64, omega=OMEGA):
         self.shape = tuple(int(n) for n in shape)
+        self.cells = int(np.prod(self.shape))
         c = np.asarray(coef, dtype=np.float64)
         gain = omega * 0.5 / c.sum()  # the smoother's factor omega / diag on all-open rows
         # (h/H)^2 per axis, then the smoother's gain, gain c0, 1 - omega and omega, in the
@@ -622,7 +623,8 @@ class _Level:
         """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call); with
         ``r`` (float64, the level's shape) returns r . x after them (:func:`gauss_seidel`)."""
         r, partial = NO_DOT if r is None else (r, self.partial)
-        return gauss_seidel(x, b, self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
+        smoother = gauss_seidel.on(self.cells)
+        return smoother(x, b, self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
 
 
 class MultigridPoisson:
@@ -731,11 +733,11 @@ class MultigridPoisson:
         lev = self.levels[n]
         nxt = self.levels[n + 1]
         lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=False)
-        residual_restrict(lev.x, lev.b, lev.args(), lev.ratio, nxt.b)
+        residual_restrict.on(lev.cells)(lev.x, lev.b, lev.args(), lev.ratio, nxt.b)
         nxt.x[...] = 0.0
         for _ in range(2 if n in W_LEVELS else 1):
             self._cycle(n + 1)
-        prolong_add(nxt.x, lev.ratio, lev.x)
+        prolong_add.on(lev.cells)(nxt.x, lev.ratio, lev.x)
         return lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=True, r=r)
 
     def solve(self, x, b, tol: float, max_iterations: int, atol: float = 0.0):

@@ -70,6 +70,12 @@ class Kernel:
     def __call__(self, *args):
         return (self.parallel if _Choice.parallel else self.serial)(*args)
 
+    def on(self, cells: int):
+        """The version for a field of ``cells`` cells within the run's choice: serial on
+        one below PARALLEL_CELLS even where the run's grid is larger (a coarse multigrid
+        level)."""
+        return self.parallel if _Choice.parallel and cells >= PARALLEL_CELLS else self.serial
+
 
 def threaded(**options):
     """Decorator: a :class:`Kernel` of the function, njit ``options`` for both versions."""
