@@ -32,7 +32,7 @@ def pytest_configure(config):
         return
     if not _cache_is_empty():
         return
-    print("windbench: empty numba cache: compiling the kernels once (about 90 s on 2 cores)")
+    print("windbench: empty numba cache: compiling the kernels once (about a minute on 2 cores)")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     with tempfile.TemporaryDirectory() as tmp:
         done = subprocess.run(
