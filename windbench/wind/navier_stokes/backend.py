@@ -598,7 +598,10 @@ class NavierStokesWind(WindField):
         return iters, res, rhs_norm
 
     def _couple(self, obstacles: Obstacles):
-        """Paper §4.1.2 (``paper``/``projection``): act on the air where the cloth is."""
+        """Paper §4.1.2: act on the air where the cloth is (``wind.coupling``,
+        :mod:`.coupling`). ``paper`` removes the air's velocity normal to the cloth,
+        relative to it, next to every cell the cloth cuts; ``projection`` closes the faces
+        the cloth crosses in the pressure solve instead. Returns the cells the cloth cuts."""
         self._blocked, self._loads = None, None
         self._pockets = (self._pockets[0], 0)
         tris = obstacles.cloth_triangles
@@ -608,13 +611,25 @@ class NavierStokesWind(WindField):
         vel = np.ascontiguousarray(obstacles.cloth_velocities, dtype=np.float64)
         tris = np.ascontiguousarray(tris, dtype=np.int64)
         start, items = triangle_cells(pos, tris, self.grid)
+        if self.coupling == "paper":
+            self._remove_normal_velocity(pos, vel, tris, start, items)
+        else:
+            self._close_cloth_faces(pos, vel, tris, start, items, obstacles.cloth_mobility)
+        self._apply_boundaries(set_normal=True)
+        if self.coupling == "projection":
+            rows, _, weight = self._blocked
+            self._set_membrane_weights(rows, weight)
+        return int(np.count_nonzero(np.diff(start)))
+
+    def _remove_normal_velocity(self, pos, vel, tris, start, items):
+        """``paper``: u <- u - ((u - v_cloth) . n) n on the faces next to the cells the
+        cloth cuts (:func:`.coupling.remove_normal_component`)."""
         marked = np.diff(start) > 0
         index = np.full(self.grid.n_cells, -1, dtype=np.int64)
         index[marked] = np.arange(marked.sum())
         index = index.reshape(self.grid.shape)
         m = int(marked.sum())
-        normals = np.zeros((m, 3))
-        velocity = np.zeros((m, 3))
+        normals, velocity = np.zeros((m, 3)), np.zeros((m, 3))
         coupling.cell_normals(pos, vel, tris, start, items, index, normals, velocity)
         u, v, w = self.q
         for a in range(3):
@@ -622,28 +637,25 @@ class NavierStokesWind(WindField):
                 self.q[a], a, u, v, w, index, normals, velocity, self.work[a]
             )
         self.q, self.work = self.work, self.q
-        if self.coupling == "projection":
-            mobility = obstacles.cloth_mobility
-            if mobility is None:
-                mobility = np.zeros(pos.shape[0])
-            rows, vals, weight = coupling.blocked_faces(
-                pos,
-                vel,
-                np.ascontiguousarray(mobility, dtype=np.float64),
-                tris,
-                start,
-                items,
-                self.lower,
-                self.h,
-                np.asarray(self.grid.shape, dtype=np.int64),
-            )
-            self._blocked = (rows, vals, weight)
-            for a in range(3):
-                self.free[a][...] = self.free_static[a]
-        self._apply_boundaries(set_normal=True)
-        if self.coupling == "projection":
-            self._set_membrane_weights(rows, weight)
-        return m
+
+    def _close_cloth_faces(self, pos, vel, tris, start, items, mobility):
+        """``projection``: the faces the cloth crosses (:func:`.coupling.blocked_faces`),
+        kept for the boundary fill and the pressure solve; the free-face masks reset."""
+        if mobility is None:
+            mobility = np.zeros(pos.shape[0])
+        self._blocked = coupling.blocked_faces(
+            pos,
+            vel,
+            np.ascontiguousarray(mobility, dtype=np.float64),
+            tris,
+            start,
+            items,
+            self.lower,
+            self.h,
+            np.asarray(self.grid.shape, dtype=np.int64),
+        )
+        for a in range(3):
+            self.free[a][...] = self.free_static[a]
 
     def _set_membrane_weights(self, rows, weight):
         """The Poisson weights with the cloth's faces (:func:`.coupling.move_membranes`) and
