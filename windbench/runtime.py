@@ -4,7 +4,9 @@ Thread budget (``runtime.threads``): a run's parallel kernels use ``auto`` = the
 this process may run on divided by the runs a launcher has in flight at once (at least
 one), or the number given. A parallel sweep of two runs on two cores then gives each run
 one core instead of two threads each that take turns on both. Set with
-``numba.set_num_threads`` before the run's first kernel; the dataset records it.
+``numba.set_num_threads`` before the run's first kernel; the dataset records it. (A
+Navier-Stokes grid below ``threads.PARALLEL_CELLS`` cells runs serial kernels whatever
+the count: :mod:`windbench.wind.navier_stokes.threads`.)
 
 Honest timing: each step records its process CPU time beside its wall time, and the
 dataset the machine's load average when the run starts and ends (:func:`load_average`);
