@@ -691,7 +691,7 @@ class NavierStokesWind(WindField):
 
     def step(self, dt: float, obstacles: Obstacles) -> None:
         t0 = time.perf_counter()
-        threads.select(self.grid.n_cells)  # the thread count may have changed
+        threads.select(self.grid.n_cells)  # another solver may have chosen since
         self.time += dt
         if self.times.varies:  # the inflow of this step's end
             self.planes = self._boundary_planes()

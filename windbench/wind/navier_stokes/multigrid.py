@@ -21,7 +21,8 @@ the coarse levels and ``FINE_OMEGA`` = 1 on the finest, the same sweeps in rever
 the way up, so that the cycle is the symmetric positive definite preconditioner CG needs.
 The first coarse levels correct twice (a W, ``W_LEVELS``), the others once (a V); the
 cycle runs in single precision (``PRECONDITIONER_DTYPE``), CG in double. The levels below
-``SERIAL_CELLS`` cells run as one compiled call on flat tables (:mod:`.coarse_levels`).
+``SERIAL_CELLS`` cells run as one compiled call on flat tables (:mod:`.coarse_levels`);
+those below ``threads.PARALLEL_CELLS`` use the kernels' serial versions (:mod:`.threads`).
 
 The kernels work row by row along z, with each row classified once per weight change
 (:func:`classify_rows`): ALL_OPEN rows use the constant 7-point stencil, ROW_CONSTANT rows
