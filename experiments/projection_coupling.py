@@ -4,7 +4,7 @@
   normal to a uniform 2 m/s wind in an 8 x 4 x 4 m channel (6 % blockage) after 2.5 s, at
   32, 48 and 64 cells along the channel, with the runs' default eddy viscosity
   (``mixing_length``; Hoerner: 1.17 for a free plate);
-- ``two_flags_wall``: the scene at 32 cells in a developed flow (the scene's automatic
+- ``two_flags_wall``: the scene at 32 and 64 cells in a developed flow (the scene's automatic
   spin-up, two flow-through times, then 4 s recorded) at dt 1/60 and 0.01, ``paper`` and
   ``projection`` coupling: whether it completes, each flag's mean |F| over the recorded
   steps and the sheltered-to-exposed force ratio.
@@ -67,14 +67,15 @@ def plate_drag(resolution: int, duration: float = 2.5) -> dict:
     return {"case": "plate", "resolution": resolution, "drag_coefficient": force[0] / (0.5 * U**2)}
 
 
-def flags(coupling: str, dt: float) -> dict:
-    """two_flags_wall at 32 cells with ``coupling`` at ``dt``, 4 s after the spin-up."""
+def flags(coupling: str, dt: float, resolution: int) -> dict:
+    """two_flags_wall at ``resolution`` cells with ``coupling`` at ``dt``, 4 s after the
+    spin-up."""
     cfg = compose_config(
         [
             "scene=two_flags_wall",
             "wind=navier_stokes",
             f"wind.coupling={coupling}",
-            "grid.resolution=32",
+            f"grid.resolution={resolution}",
             f"sim.dt={dt}",
             "sim.duration=4.0",
             "sim.spinup=auto",
@@ -93,7 +94,7 @@ def flags(coupling: str, dt: float) -> dict:
     late = force.mean(axis=0)  # the recorded steps: after the spin-up
     return {
         "case": f"two_flags_wall_{coupling}",
-        "resolution": 32,
+        "resolution": resolution,
         "dt": dt,
         "status": status,
         "steps": force.shape[0],
@@ -105,7 +106,12 @@ def flags(coupling: str, dt: float) -> dict:
 
 def main() -> None:
     rows = [plate_drag(n) for n in (32, 48, 64)]
-    rows += [flags(c, dt) for dt in (1.0 / 60.0, 0.01) for c in ("paper", "projection")]
+    rows += [
+        flags(c, dt, n)
+        for n in (32, 64)
+        for dt in (1.0 / 60.0, 0.01)
+        for c in ("paper", "projection")
+    ]
     keys = []
     for row in rows:
         keys += [k for k in row if k not in keys]
