@@ -79,7 +79,7 @@ from windbench.wind.navier_stokes.projection import (
     divergence_norms,
     face_flux,
     face_weights,
-    max_abs,
+    largest_magnitude,
     subtract_gradient,
 )
 from windbench.wind.primitives import parameter_table, profile_scale, superpose
@@ -716,7 +716,7 @@ class NavierStokesWind(WindField):
         t4 = time.perf_counter()
         peak, squares, count = divergence_norms(*self.q, self.target, self.solid)
         scale = 1.0 / self.scene.reference_speed  # h div u / U_ref
-        speed = max(max_abs(x) for x in self.q)
+        speed = max(largest_magnitude(x) for x in self.q)
         self._stats = {
             "pressure_iterations": float(iters),
             "pressure_residual": float(res),
