@@ -189,7 +189,6 @@ class NavierStokesWind(WindField):
     def __init__(self, scene, grid, params):
         _check(params)
         super().__init__(scene, grid, params)
-        threads.select(grid.n_cells)  # the kernels' versions (threads.py)
         self.advection = str(params.advection)
         self.coupling = str(params.coupling)
         self.viscosity = float(params.viscosity)
