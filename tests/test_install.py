@@ -1,11 +1,14 @@
 """The wheel works outside a checkout: built from a copy of the sources, installed into a
-fresh venv (``--system-site-packages`` for the dependencies, ``--no-deps``: no download),
-``windbench --help`` and one tiny run from a folder with no ``conf/`` in sight."""
+fresh venv (``--no-deps``: no download; the dependencies are the test environment's own,
+whether that is the system's Python or a venv), ``windbench --help`` and one tiny run from
+a folder with no ``conf/`` in sight."""
 
 import os
 import shutil
+import site
 import subprocess
 import sys
+import sysconfig
 from pathlib import Path
 
 import xarray as xr
@@ -18,6 +21,14 @@ def _run(args, **kw):
     proc = subprocess.run(args, capture_output=True, text=True, timeout=600, **kw)
     assert proc.returncode == 0, f"{args}\n{proc.stdout}\n{proc.stderr}"
     return proc
+
+
+def _see_the_test_environments_packages(venv: Path) -> None:
+    """``--system-site-packages`` shows the base interpreter's packages only: when the tests
+    run in a venv, its site-packages reach the new venv through a .pth file (appended to
+    sys.path, after the new venv's own site-packages, so that the wheel comes first)."""
+    purelib = Path(sysconfig.get_path("purelib", vars={"base": venv, "platbase": venv}))
+    (purelib / "test_environment.pth").write_text("\n".join(site.getsitepackages()) + "\n")
 
 
 def test_a_built_wheel_runs_from_a_fresh_venv(tmp_path):
@@ -37,6 +48,7 @@ def test_a_built_wheel_runs_from_a_fresh_venv(tmp_path):
     (wheel,) = (tmp_path / "dist").glob("windbench-*.whl")
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", "--system-site-packages", venv], env=env)
+    _see_the_test_environments_packages(venv)
     _run([venv / "bin" / "python", "-m", "pip", "install", "-q", "--no-deps", wheel], env=env)
 
     work = tmp_path / "elsewhere"
