@@ -14,7 +14,13 @@ from windbench.wind import backends
 cf_xarray = pytest.importorskip("cf_xarray")
 from cf_xarray.units import units as udunits  # noqa: E402 - needs cf_xarray (and pint)
 
-RUN = ["scene=two_flags_wall", "grid.resolution=20", "sim.duration=0.05", "sim.progress=false"]
+RUN = [
+    "scene=two_flags_wall",
+    "grid.resolution=20",
+    "sim.dt=0.05",
+    "sim.duration=0.1",
+    "sim.progress=false",
+]
 
 
 @pytest.fixture(scope="module")
