@@ -30,6 +30,8 @@ from collections import defaultdict
 from datetime import UTC, datetime
 from pathlib import Path
 
+from windbench.dataset import git_commit
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments" / "results" / "suite_compile.csv"
 LOG_DIR = "WINDBENCH_COMPILE_LOG"  # environment: where the plugin writes its JSON files
@@ -65,7 +67,7 @@ def _rows(folder: Path, wall: float, cpu: float, pytest_seconds: float) -> list[
     for path in sorted(folder.glob("*.json")):
         for test, seconds in json.loads(path.read_text()):
             by_file[(test, path.stem)] += seconds
-    stamp = dict(date=datetime.now(UTC).isoformat(timespec="seconds"), commit=_commit())
+    stamp = dict(date=datetime.now(UTC).isoformat(timespec="seconds"), commit=git_commit())
     rows = [
         {**stamp, "test_file": test, "process": worker, "compile_seconds": round(s, 2)}
         for (test, worker), s in sorted(by_file.items(), key=lambda kv: -kv[1])
@@ -74,11 +76,6 @@ def _rows(folder: Path, wall: float, cpu: float, pytest_seconds: float) -> list[
     times = dict(suite_wall_seconds=round(wall, 1), suite_cpu_seconds=round(cpu, 1))
     rows.append({**stamp, **total, **times, "pytest_seconds": pytest_seconds})
     return rows
-
-
-def _commit() -> str:
-    out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True)
-    return out.stdout.decode().strip() or "unknown"
 
 
 def main() -> None:
