@@ -191,6 +191,21 @@ def test_a_live_lock_refuses_and_a_stale_one_is_taken_over(tmp_path, caplog):
     assert not theirs.exists() and other.exists()  # only the dead writer's temporaries
 
 
+@pytest.mark.parametrize("hard_links", [True, False])
+def test_the_lock_file_appears_whole_and_leaves_no_temporary(tmp_path, monkeypatch, hard_links):
+    """A lock file is never seen empty: its text is written before it takes the lock's name
+    (a hard link; exclusive create where the file system has no hard links)."""
+    if not hard_links:
+        monkeypatch.setattr(os, "link", lambda *a: (_ for _ in ()).throw(OSError("no links")))
+    with FolderLock(tmp_path):
+        pid, host, _ = (tmp_path / LOCK_FILE).read_text().split()
+        assert (int(pid), host) == (os.getpid(), socket.gethostname())
+        assert sorted(p.name for p in tmp_path.iterdir()) == [LOCK_FILE]
+        with pytest.raises(FileExistsError):
+            FolderLock(tmp_path)._create()
+    assert not any(tmp_path.iterdir())
+
+
 def test_a_lock_held_on_another_host_is_left_alone(tmp_path):
     (tmp_path / LOCK_FILE).write_text("1234 some-other-host 0\n")
     with pytest.raises(FolderBusy, match="on host some-other-host .* delete it if that run"):

@@ -130,17 +130,34 @@ class FolderLock:
         self.folder.mkdir(parents=True, exist_ok=True)
         for _ in range(3):  # create, or take over a stale lock and create
             try:
-                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+                self._create()
             except FileExistsError:
                 if self._held_by_us():
                     return self
                 self._take_over()  # FolderBusy if a live run holds it
                 continue
-            with os.fdopen(fd, "w") as fh:
-                fh.write(f"{os.getpid()} {socket.gethostname()} {time.time():.0f}\n")
             self.owned = True
             return self
         raise FolderBusy(f"{self.where}: could not take the lock {self.path}")
+
+    def _create(self) -> None:
+        """Create the lock file whole or not at all (FileExistsError if it exists): its
+        text goes to a temporary first, which is then hard-linked to the lock's name, so
+        that another process never reads a lock file that is still empty."""
+        host, pid = socket.gethostname(), os.getpid()
+        tmp = self.folder / f"{LOCK_FILE}.{owner_tag(host, pid)}.new.tmp"
+        tmp.write_text(f"{pid} {host} {time.time():.0f}\n")
+        try:
+            os.link(tmp, self.path)
+        except FileExistsError:
+            raise
+        except OSError:  # a file system without hard links: exclusive create, then write
+            with os.fdopen(
+                os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666), "w"
+            ) as fh:
+                fh.write(tmp.read_text())
+        finally:
+            tmp.unlink(missing_ok=True)
 
     def __exit__(self, *exc) -> None:
         if self.owned:
