@@ -20,6 +20,8 @@ from windbench.cloth.self_contact import (
     push_edges,
     refit,
     self_contact_model,
+    self_contact_substep,
+    self_contacts,
     self_intersections,
     tree_fit,
     triangles_cross,
@@ -267,6 +269,34 @@ def test_two_crossing_edges_are_pushed_to_the_thickness_with_momentum_kept(side)
     gap = p[2:, 2].mean() - (0.7 * p[0, 2] + 0.3 * p[1, 2])  # closest points: s = 0.3, u = 0.5
     assert gap == pytest.approx(side * 0.005, abs=1e-12)
     np.testing.assert_allclose((p - before).sum(axis=0), 0.0, atol=1e-15)
+
+
+def _triangle(radius, z):
+    """An equilateral triangle of circumradius ``radius`` about the z axis at height z."""
+    a = np.array([0.3, 0.3 + 2 * np.pi / 3, 0.3 + 4 * np.pi / 3])
+    return np.c_[radius * np.cos(a), radius * np.sin(a), np.full(3, z)]
+
+
+def test_a_layer_pushed_through_the_one_below_is_brought_back_by_a_second_pass():
+    """Three stacked triangles, thickness 5 mm (reach 20 mm): a heavy small one (V) that
+    crossed the light middle one (A, z = 0) to z = -19.5 mm, over a pinned wide one (B,
+    z = -21 mm, beyond A's reach). One pass pushes V up and A down, through B, which it
+    did not search: A crosses B. The second pass (the pass pushed a pair) finds A against
+    B and puts A back at B's thickness, z = -16 mm, with no crossing left."""
+    sizes, tris = (0.02, 0.1, 0.3), np.arange(9).reshape(3, 3)
+    rest = np.vstack([_triangle(r, z) for r, z in zip(sizes, (0.04, 0.0, -0.04), strict=True)])
+    start = np.vstack([_triangle(r, z) for r, z in zip(sizes, (0.004, 0.0, -0.021), strict=True)])
+    p = np.vstack([_triangle(r, z) for r, z in zip(sizes, (-0.0195, 0.0, -0.021), strict=True)])
+    inv_mass = np.r_[np.full(3, 0.01), np.ones(3), np.zeros(3)]
+    sc = self_contact_model(rest, tris, 0.005)
+    one = p.copy()
+    assert self_contacts(sc, inv_mass, one, start, tree_fit(sc, 9)) > 0
+    assert self_intersections(sc, one) == 1 and one[3:6, 2].min() < -0.021
+    fit = tree_fit(sc, 9)
+    fit.anchor[:] = start
+    self_contact_substep(sc, inv_mass, p, start, fit, True)
+    assert fit.passes[0] == 2 and self_intersections(sc, p) == 0
+    np.testing.assert_allclose(p[3:6, 2], -0.021 + 0.005, atol=1e-12)
 
 
 def test_a_scene_without_cloth_has_an_empty_patch_tree():

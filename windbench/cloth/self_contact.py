@@ -49,6 +49,7 @@ from numba import njit
 
 LEAF = 4  # triangles per leaf patch at most
 REACH = 4.0  # a vertex this many thicknesses behind a triangle is brought back
+PASS_SWEEPS = 2  # passes of the self-contacts at most, while the last pushed a pair
 CONTACT_CONE = math.radians(60.0)  # a patch is flat for the contacts below this half-angle
 _COS_CONTACT = math.cos(CONTACT_CONE)
 _NEVER_FLAT = 2.0  # a cosine no cone reaches: boxes alone (the intersection figure)
@@ -645,22 +646,24 @@ def self_contacts(sc, inv_mass, p, x0, fit):
     """One pass of the contacts of the module docstring, each vertex and edge kept on the
     side it lay on at ``x0`` (the substep's start): over the leaf patches that may touch
     (:func:`leaf_pairs` after :func:`refit`, then :func:`close_pairs`), vertices against
-    triangles, then edges against edges."""
+    triangles, then edges against edges. Returns the number of pairs it pushed apart."""
     triangles, thickness, edges = sc.triangles, sc.thickness, sc.tree.leaf_edge
     if triangles.shape[0] == 0:
-        return
+        return 0
     reach = REACH * thickness
     refit(sc.tree, triangles, p, fit)
     pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_CONTACT, reach)
     vt, ee = close_pairs(sc, p, fit.box, pairs, found, reach)
+    pushed = 0
     for q in range(vt.shape[0]):
         f = vt[q, 1]
         tri = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
-        push_vertex(p, x0, inv_mass, vt[q, 0], tri, thickness, reach)
+        pushed += push_vertex(p, x0, inv_mass, vt[q, 0], tri, thickness, reach) < 0.0
     for q in range(ee.shape[0]):
         e, g = ee[q, 0], ee[q, 1]
         i, j, k, l = edges[e, 0], edges[e, 1], edges[g, 0], edges[g, 1]
-        push_edges(p, x0, inv_mass, i, j, k, l, thickness, reach)
+        pushed += push_edges(p, x0, inv_mass, i, j, k, l, thickness, reach) < 0.0
+    return pushed
 
 
 @njit(cache=True)
@@ -688,11 +691,18 @@ def self_contact_substep(sc, inv_mass, p, xp, fit, last):
     """The self-contacts of one substep: :func:`self_contacts` with the sides of the last
     pass (``fit.anchor``, the frame's start for the first), when :func:`pass_due`. A slow
     cloth (a shirt, a sheltered flag) runs it once or twice a frame, a flapping flag in
-    every substep."""
+    every substep.
+
+    A pass that pushed a pair apart is followed by another, up to PASS_SWEEPS, with the
+    same sides: a push can carry a vertex or an edge into a layer that was not close when
+    the pass searched (in a quad folded flat about its diagonal, the two folds pushed
+    apart press into the triangles beyond them), and only a new search finds that."""
     if pass_due(p, xp, fit.anchor, sc.thickness, last):
-        self_contacts(sc, inv_mass, p, fit.anchor, fit)
+        for _ in range(PASS_SWEEPS):
+            fit.passes[0] += 1
+            if self_contacts(sc, inv_mass, p, fit.anchor, fit) == 0:
+                break
         fit.anchor[:] = p
-        fit.passes[0] += 1
 
 
 @njit(cache=True)
