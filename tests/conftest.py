@@ -74,3 +74,17 @@ def cli(tmp_path):
         )
 
     return _cli
+
+
+def pytest_collection_modifyitems(items):
+    """The heavy test files (marked ``heavy``) first, then the rest by their number of
+    tests, most first: the order the test processes are handed whole files in
+    (``--dist loadfile --no-loadscope-reorder``), so that the long ones do not start last
+    and leave one process working alone at the end. Stable: a file's tests keep their
+    order, and every process sorts alike."""
+    counts, heavy = {}, set()
+    for item in items:
+        counts[item.path] = counts.get(item.path, 0) + 1
+        if item.get_closest_marker("heavy"):
+            heavy.add(item.path)
+    items.sort(key=lambda item: (item.path not in heavy, -counts[item.path]))

@@ -11,7 +11,10 @@ import sys
 import sysconfig
 from pathlib import Path
 
+import pytest
 import xarray as xr
+
+pytestmark = pytest.mark.heavy  # builds a wheel and installs it in a new environment
 
 ROOT = Path(__file__).resolve().parent.parent
 SOURCES = ("pyproject.toml", "setup.py", "README.md", "windbench", "conf")

@@ -20,6 +20,8 @@ from windbench.errors import DatasetUnreadable, FolderBusy
 from windbench.report.collect import code_versions, combine, find_runs, read_run, read_runs
 from windbench.sweep import LOCK_FILE, FolderLock, exit_status, resume_decision, write_status
 
+pytestmark = pytest.mark.heavy  # runs sweeps from the command line
+
 TINY = ["scene=two_flags_wall", "grid.resolution=32", "sim.duration=0.05", "output.snapshots=2"]
 
 

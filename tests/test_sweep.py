@@ -17,6 +17,8 @@ from windbench.cli import compose_config
 from windbench.errors import ConfigError
 from windbench.simulate import prepare
 
+pytestmark = pytest.mark.heavy  # runs sweeps under three launchers
+
 SWEEP = [
     "scene=empty",
     "grid.resolution=8",

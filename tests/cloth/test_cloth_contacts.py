@@ -31,6 +31,8 @@ from windbench.config import ClothConfig
 from windbench.errors import ConfigError
 from windbench.geometry.bodies import body_from_config, body_table
 
+pytestmark = pytest.mark.heavy  # compiles the frame kernel with self-collision
+
 DT = 1.0 / 60.0
 POLE = {"type": "capsule", "a": [0.0, -1.0, 0.0], "b": [0.0, 1.0, 0.0], "radius": 0.01}
 

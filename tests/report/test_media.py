@@ -20,6 +20,8 @@ from windbench.report.collect import find_runs, read_runs  # noqa: E402
 from windbench.report.frames import open_frames, side_pressure  # noqa: E402
 from windbench.simulate import prepare  # noqa: E402
 
+pytestmark = pytest.mark.heavy  # runs the runs its animations are drawn from
+
 
 def test_frames_are_kept_every_interval_and_agree_with_therun_ok(frame_runs):
     with xr.open_dataset(frame_runs / "wall_particles" / "windbench.nc") as ds:

@@ -15,6 +15,8 @@ from omegaconf import OmegaConf
 from windbench.cli import CONFIG_DIR, compose_config
 from windbench.simulate import prepare
 
+pytestmark = pytest.mark.heavy  # runs a run of each paper sweep
+
 PAPER_SCENES = {"flag", "two_flags_wall", "shirt", "opposing_sources"}
 BACKENDS = {"global", "particles", "navier_stokes"}
 

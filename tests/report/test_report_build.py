@@ -31,6 +31,8 @@ from windbench.report.collect import (  # noqa: E402
 from windbench.report.lee import assign_lee_errors, choose_references  # noqa: E402
 from windbench.simulate import Simulation, run  # noqa: E402
 
+pytestmark = pytest.mark.heavy  # runs sweeps and reports from the command line
+
 ROOT = Path(__file__).resolve().parents[2]
 RESOLUTIONS = (20, 30)
 DTS = (0.05, 0.1)

@@ -18,6 +18,8 @@ from windbench.simulate import run
 from windbench.wind.base import Obstacles
 from windbench.wind.navier_stokes import threads as versions
 
+pytestmark = pytest.mark.heavy  # compiles the kernels' parallel versions
+
 FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
 NO_OBSTACLES = Obstacles.rigid_only(())
 

@@ -14,6 +14,8 @@ from windbench.simulate import prepare
 from windbench.wind import make_wind
 from windbench.wind.base import Obstacles
 
+pytestmark = pytest.mark.heavy  # compiles the float32 kernels
+
 
 @pytest.mark.slow  # a study (four Taylor-Green runs); the fence tests below cover float32
 def test_float32_keeps_the_taylor_green_and_poiseuille_errors():

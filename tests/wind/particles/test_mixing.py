@@ -31,6 +31,8 @@ from windbench.wind.particles.mixing import (
 from windbench.wind.primitives import superpose
 from windbench.wind.surface_layer import sources_viscosity
 
+pytestmark = pytest.mark.heavy  # compiles the mixing lee's tracer
+
 MIXING = "wind.lee_model=mixing"
 LOG_WIND = {
     "type": "uniform",
