@@ -694,9 +694,11 @@ def self_contact_substep(sc, inv_mass, p, xp, fit, last):
     every substep.
 
     A pass that pushed a pair apart is followed by another, up to PASS_SWEEPS, with the
-    same sides: a push can carry a vertex or an edge into a layer that was not close when
-    the pass searched (in a quad folded flat about its diagonal, the two folds pushed
-    apart press into the triangles beyond them), and only a new search finds that."""
+    same sides: a push can carry a vertex or an edge through a layer that was beyond the
+    reach when the pass searched (a layer pushed off the one above it, into the one
+    below), and only a new search finds that. Without it, a quad of two_flags_wall's
+    sheltered flag folded flat about its diagonal left its layers crossed for the rest of
+    the run."""
     if pass_due(p, xp, fit.anchor, sc.thickness, last):
         for _ in range(PASS_SWEEPS):
             fit.passes[0] += 1
