@@ -198,7 +198,11 @@ def test_the_lock_file_appears_whole_and_leaves_no_temporary(tmp_path, monkeypat
     """A lock file is never seen empty: its text is written before it takes the lock's name
     (a hard link; exclusive create where the file system has no hard links)."""
     if not hard_links:
-        monkeypatch.setattr(os, "link", lambda *a: (_ for _ in ()).throw(OSError("no links")))
+
+        def no_link(*args):
+            raise OSError("this file system has no hard links")
+
+        monkeypatch.setattr(os, "link", no_link)
     with FolderLock(tmp_path):
         pid, host, _ = (tmp_path / LOCK_FILE).read_text().split()
         assert (int(pid), host) == (os.getpid(), socket.gethostname())
