@@ -195,8 +195,9 @@ def test_a_live_lock_refuses_and_a_stale_one_is_taken_over(tmp_path, caplog):
 
 @pytest.mark.parametrize("hard_links", [True, False])
 def test_the_lock_file_appears_whole_and_leaves_no_temporary(tmp_path, monkeypatch, hard_links):
-    """A lock file is never seen empty: its text is written before it takes the lock's name
-    (a hard link; exclusive create where the file system has no hard links)."""
+    """The lock file holds ``pid host time`` and no temporary is left beside it, taken by
+    a hard link of its finished text (never seen empty) or, on a file system without hard
+    links, by exclusive create; either way a second taker gets FileExistsError."""
     if not hard_links:
 
         def no_link(*args):
