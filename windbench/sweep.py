@@ -146,7 +146,8 @@ class FolderLock:
         that another process never reads a lock file that is still empty."""
         host, pid = socket.gethostname(), os.getpid()
         tmp = self.folder / f"{LOCK_FILE}.{owner_tag(host, pid)}.new.tmp"
-        tmp.write_text(f"{pid} {host} {time.time():.0f}\n")
+        text = f"{pid} {host} {time.time():.0f}\n"
+        tmp.write_text(text)
         try:
             os.link(tmp, self.path)
         except FileExistsError:
@@ -155,7 +156,7 @@ class FolderLock:
             with os.fdopen(
                 os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666), "w"
             ) as fh:
-                fh.write(tmp.read_text())
+                fh.write(text)
         finally:
             tmp.unlink(missing_ok=True)
 
