@@ -13,7 +13,11 @@ from windbench.cloth.edge_contact import edge_minimum, surface_penetration
 from windbench.cloth.mesh import flag_mesh
 from windbench.cloth.model import ClothModel
 from windbench.cloth.self_contact import (
+    _NEVER_FLAT,
     LEAF,
+    _edges_close,
+    _vertex_near_triangle,
+    close_pairs,
     leaf_pairs,
     pass_due,
     patch_tree,
@@ -238,9 +242,43 @@ def test_a_flat_sheet_needs_no_leaf_tests_and_a_folded_one_does():
     assert any((a in lower and b in upper) or (a in upper and b in lower) for a, b in pairs[:found])
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_close_pair_search_meets_each_pair_once_as_an_all_pairs_search_does(seed):
+    """Without the cone culling, the vertex-triangle and edge-edge pairs found through the
+    leaf pairs are exactly those of an all-pairs search with the same tests, each once."""
+    model, x = _crumpled(seed=seed)
+    sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
+    reach = 0.05
+    fit = tree_fit(sc, x.shape[0])
+    refit(sc.tree, sc.triangles, x, fit)
+    pairs, found = leaf_pairs(sc.tree, sc.triangles, fit, _NEVER_FLAT, reach)
+    vt, ee = close_pairs(sc, x, fit.box, pairs, found, reach)
+    tris = [tuple(int(v) for v in t) for t in sc.triangles]
+    expected_vt = {
+        (i, f)
+        for f, t in enumerate(tris)
+        for i in range(x.shape[0])
+        if i not in t and _vertex_near_triangle(x, i, t, reach)
+    }
+    edges = sorted({tuple(sorted((t[k], t[(k + 1) % 3]))) for t in tris for k in range(3)})
+    expected_ee = {
+        (e, g)
+        for n, e in enumerate(edges)
+        for g in edges[n + 1 :]
+        if not set(e) & set(g) and _edges_close(x, *e, *g, reach)
+    }
+    found_ee = [
+        tuple(sorted((tuple(sc.tree.leaf_edge[a]), tuple(sc.tree.leaf_edge[b])))) for a, b in ee
+    ]
+    assert len(expected_vt) > 20 and len(expected_ee) > 20
+    assert sorted(map(tuple, vt.tolist())) == sorted(expected_vt)
+    assert sorted(found_ee) == sorted(expected_ee)
+
+
 def test_the_patch_hierarchy_partitions_the_triangles_and_knows_separate_pieces():
-    """Every triangle lies in exactly one leaf; two separate sheets are not one piece at
-    the root, each sheet's own subtree is."""
+    """Every triangle lies in exactly one leaf, every vertex and edge is listed by exactly
+    one leaf; two separate sheets are not one piece at the root, each sheet's own subtree
+    is."""
     a = _sheet((0.0, 0.0, 0.0), 1.0, 6, name="a")
     b = _sheet((0.0, 0.0, 3.0), 1.0, 6, name="b")  # the root splits along z
     model = ClothModel.from_meshes([a, b])
@@ -250,6 +288,9 @@ def test_the_patch_hierarchy_partitions_the_triangles_and_knows_separate_pieces(
         [tree.order[tree.first[k] : tree.first[k] + tree.count[k]] for k in leaves]
     )
     assert np.array_equal(np.sort(covered), np.arange(len(model.triangles)))
+    assert np.array_equal(np.sort(tree.leaf_vert), np.arange(model.n_vertices))
+    edges = {tuple(sorted((t[k], t[(k + 1) % 3]))) for t in model.triangles for k in range(3)}
+    assert sorted(map(tuple, tree.leaf_edge.tolist())) == sorted(edges)
     assert tree.count[leaves].max() <= LEAF
     assert not tree.connected[0]
     assert tree.connected[tree.left[0]] and tree.connected[tree.right[0]]

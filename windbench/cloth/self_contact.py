@@ -59,9 +59,12 @@ _WIDE = -2.0  # the cosine recorded for a cone of 90 degrees or more
 class PatchTree(NamedTuple):
     """The fixed hierarchy of triangle patches (:func:`patch_tree`), nodes in preorder
     (children after their parent): node k holds the triangles order[first[k]:first[k] +
-    count[k]]; a leaf has left = right = -1 and lists its distinct vertices
+    count[k]]; a leaf has left = right = -1 and lists the vertices
     leaf_vert[vert_ptr[k]:vert_ptr[k + 1]] and edges leaf_edge[edge_ptr[k]:edge_ptr[k + 1]]
-    (empty ranges for inner nodes)."""
+    it owns (empty ranges for inner nodes). Each vertex and edge is owned by one leaf that
+    holds it, so that the search meets each vertex-triangle and edge-edge pair in one leaf
+    pair only: listed by every leaf that holds them, a border vertex of leaves of two quads
+    would be tested up to four times, a border edge twice."""
 
     order: np.ndarray  # (m,) triangle ids, patch by patch
     first: np.ndarray  # (N,)
@@ -139,6 +142,15 @@ def _csr(lists):
     return ptr, values
 
 
+def _claim(items: np.ndarray, owned: set) -> np.ndarray:
+    """The rows of ``items`` (vertex ids, or vertex pairs of edges) not yet in ``owned``,
+    which then holds them too."""
+    keys = [tuple(np.atleast_1d(item).tolist()) for item in items]
+    keep = [k for k, key in enumerate(keys) if key not in owned]
+    owned.update(keys[k] for k in keep)
+    return items[keep]
+
+
 def patch_tree(rest, triangles) -> PatchTree:
     """The hierarchy of the module docstring over ``triangles`` at the rest positions.
 
@@ -153,13 +165,14 @@ def patch_tree(rest, triangles) -> PatchTree:
     first, count, left, right = (np.array(col, np.int64) for col in zip(*nodes, strict=True))
     connected = np.zeros(len(nodes), np.bool_)
     verts, edges = [], []
+    owned_vertices, owned_edges = set(), set()
     for k in range(len(nodes) - 1, -1, -1):
         own = tri[order[first[k] : first[k] + count[k]]]
         if left[k] < 0:
             connected[k] = own.shape[0] == 0 or _one_piece(own)
-            verts.append(np.unique(own))
+            verts.append(_claim(np.unique(own), owned_vertices))
             pairs = np.sort(own[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-            edges.append(np.unique(pairs, axis=0))
+            edges.append(_claim(np.unique(pairs, axis=0), owned_edges).reshape(-1, 2))
         else:
             a, b = left[k], right[k]
             shared = np.intersect1d(
