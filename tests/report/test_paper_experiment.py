@@ -59,6 +59,14 @@ def test_the_sweeps_cover_backends_scenes_resolutions_seeds_and_references():
     assert fence_levels[-1] >= 2 * _resolutions(fence)[-1]
 
 
+@pytest.mark.parametrize("experiment", ["paper", "paper_seeds", "paper_mixing", "reference"])
+def test_the_compared_cloths_and_their_references_keep_out_of_each_other(experiment):
+    """Every run of the comparison with cloth, and every reference, has self-collision on:
+    its cloth figures (self_intersections) and the flow around the cloth come from cloth
+    that does not pass through itself or another cloth."""
+    assert compose_config([f"experiment={experiment}"]).cloth.self_collision is True
+
+
 def test_the_mixing_lee_is_swept_where_the_papers_lee_is():
     """paper_mixing and fence_mixing run the particles' mixing lee on the scenes, at the
     resolutions and with the seeds that the paper's lee has in paper, paper_seeds, fence."""
