@@ -13,7 +13,15 @@ from omegaconf import OmegaConf
 
 from windbench.aero import AeroParams
 from windbench.cli import compose_config
-from windbench.report.collect import RunRecord, contention, flatten, swept_keys
+from windbench.report.build import cloth_table
+from windbench.report.collect import (
+    RunRecord,
+    _window_max,
+    contention,
+    flatten,
+    swept_keys,
+    window_mask,
+)
 from windbench.report.comparison import pareto_front
 from windbench.report.figures import (
     cost_exponents,
@@ -249,3 +257,37 @@ def test_swept_keys_are_the_settings_plus_config_keys_that_vary():
     for r, size in zip(cloth, ((40, 25), (64, 64)), strict=True):
         r.config["scene.cloths.0.resolution"] = size
     assert swept_keys(cloth)[-1] == "scene.cloths.0.resolution"
+
+
+def test_a_crossing_in_one_step_of_the_window_is_the_runs_peak_and_its_scenes():
+    """The window mean of self_intersections dilutes one crossing step; its peak does not,
+    and steps before the steady window (t < analysis_start) do not count. The cloth table
+    keeps the largest peak per scene and backend and leaves out scenes without cloth."""
+    t = np.arange(6.0)
+    ds = xr.Dataset(
+        {
+            "self_intersections": ("time", [9.0, 0.0, 0.0, 4.0, 0.0, 0.0]),
+            "max_penetration": ("time", [0.5, 0.0, 0.001, 0.0, 0.0, 0.0]),
+            "max_stretch": ("time", [0.2, 0.01, 0.02, 0.03, 0.01, 0.01]),
+        },
+        coords={"time": t},
+        attrs={"analysis_start": 1.0},
+    )
+    window = window_mask(ds)
+    assert _window_max(ds, "self_intersections", window) == 4.0  # the window mean: 0.8
+    assert _window_max(ds, "max_penetration", window) == 0.001
+    assert math.isnan(_window_max(ds, "kinetic_energy", window))  # not in the run
+    df = pd.DataFrame(
+        {
+            "wind": ["global", "global", "particles", "global"],
+            "scene": ["flag", "flag", "flag", "fence"],
+            "self_intersections_peak": [0.0, 4.0, 0.0, 0.0],
+            "max_penetration_peak": [0.0, 0.001, 0.002, 0.0],
+            "max_stretch_peak": [0.02, 0.03, 0.01, 0.0],
+        }
+    )
+    table = cloth_table(df).set_index("backend")
+    assert list(table["scene"]) == ["flag", "flag"]
+    assert table.loc["global", "runs"] == 2
+    assert table.loc["global", "intersecting triangle pairs"] == 4.0
+    assert table.loc["particles", "deepest body penetration (mm)"] == pytest.approx(2.0)

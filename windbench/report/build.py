@@ -123,6 +123,25 @@ def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index()
 
 
+def cloth_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Per scene with cloth and backend: the runs and the largest intersecting triangle
+    pairs, body penetration (mm) and edge strain over every run's steady window."""
+    cols = {
+        "self_intersections_peak": "intersecting triangle pairs",
+        "max_penetration_peak": "deepest body penetration (mm)",
+        "max_stretch_peak": "largest edge strain",
+    }
+    if df.empty or not set(cols) <= set(df):
+        return pd.DataFrame()
+    d = C.with_backend(df)
+    d["max_penetration_peak"] = d["max_penetration_peak"] * 1e3
+    g = d.groupby(["scene", "backend"], sort=True)
+    out = g[list(cols)].max()
+    out = out[out["max_stretch_peak"] > 0.0].rename(columns=cols)  # scenes with cloth
+    out.insert(0, "runs", g.size())
+    return out.reset_index()
+
+
 def lee_at_a_glance(df: pd.DataFrame) -> pd.DataFrame:
     """Per scene and backend, the finest run's lee speed ratio (and force ratio, if any)."""
     if df.empty:
@@ -202,6 +221,7 @@ def build_report(
             _measured_section(complete, place),
             plate_section(*_aero_params(records), place),
             *([checks] if checks else []),
+            _cloth_section(complete),
             _runs_section(report, swept_keys(records)),
         ]
         anim = animation.section(animations, place, regenerate, progress)
@@ -351,6 +371,23 @@ def _measured_section(complete, place) -> Section:
                 "Per scene, backend and resolution (mean over the other settings; the lee "
                 "error leaves out the reference run itself)",
             ),
+        ],
+    )
+
+
+def _cloth_section(complete) -> Section:
+    return Section(
+        "Cloth: contacts and stretch",
+        [
+            Text(
+                "The cloth's own figures, largest over the steady window of every complete "
+                "run: triangle pairs of the cloths that cross each other (0 where the cloth "
+                "never passes through itself or another cloth, `cloth.self_collision`), "
+                "how deep a cloth vertex, edge or triangle lies inside a body, and the "
+                "largest relative stretch of a cloth edge (`cloth.strain_limit` bounds the "
+                "lattice threads)."
+            ),
+            Table(cloth_table(complete), "Cloth figures per scene and backend"),
         ],
     )
 

@@ -64,6 +64,9 @@ SETTINGS = {
 IGNORED = ("scene.", "output.", "hydra.", "sim.progress", "resume", "experiment")
 REQUIRED = ("wind", "step_seconds", "cloth_position", "divergence_rms")
 AVERAGED = ("lee_speed_ratio", "lee_force_ratio", "divergence_rms")
+# cloth figures whose largest value over the steady window is kept too (``<name>_peak``):
+# a crossing or a penetration in one step is a defect that a time mean would dilute
+PEAKS = ("self_intersections", "max_penetration", "max_stretch")
 # Contention: a step whose wall time exceeds its process's CPU time by this factor waited
 # for a core; a load average above the machine's cores by this margin had more runnable
 # threads than cores (the run's own threads are at most the cores).
@@ -243,6 +246,16 @@ def _window_mean(values: np.ndarray, window: np.ndarray) -> float:
     return float(np.nanmean(chosen)) if np.isfinite(chosen).any() else math.nan
 
 
+def _window_max(ds: xr.Dataset, name: str, window: np.ndarray) -> float:
+    """The largest value of run variable ``name`` over the steady window (over every step
+    when the window is empty; NaN when the run has no such variable or no finite value)."""
+    if name not in ds or not ds.sizes.get("time", 0):
+        return math.nan
+    vals = np.asarray(ds[name].values, dtype=float)
+    chosen = vals[window] if window.any() else vals
+    return float(np.nanmax(chosen)) if np.isfinite(chosen).any() else math.nan
+
+
 def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     window = window_mask(ds) if ds.sizes.get("time", 0) else np.zeros(0, bool)
     figs: dict[str, float] = {}
@@ -257,11 +270,9 @@ def _figures(ds: xr.Dataset) -> tuple[dict, dict]:
     for name, var in ds.data_vars.items():  # backend figures (stats()): window means
         if var.dims == ("time",) and name not in known and var.dtype.kind in "fiu":
             figs[str(name)] = _window_mean(np.asarray(var.values, dtype=float), window)
-    if "divergence_max" in ds and ds.sizes.get("time", 0):
-        vals = np.asarray(ds["divergence_max"].values, dtype=float)
-        figs["divergence_max"] = float(np.nanmax(vals[window] if window.any() else vals))
-    else:
-        figs["divergence_max"] = math.nan
+    figs["divergence_max"] = _window_max(ds, "divergence_max", window)
+    for name in PEAKS:
+        figs[f"{name}_peak"] = _window_max(ds, name, window)
     phases = {}
     n_times = ds.sizes.get("time", 0)
     later = np.arange(n_times) >= 1 if n_times > 1 else np.ones(n_times, bool)
@@ -355,6 +366,8 @@ def _figure_meta(ds: xr.Dataset) -> dict:
         if name == "divergence_max":
             meta[name] = (f"{long_name}: maximum over the steady window", units)
             continue
+        if name in PEAKS:
+            meta[f"{name}_peak"] = (f"{long_name}: maximum over the steady window", units)
         meta[str(name)] = (f"{long_name}: time mean over {late}", units)
         if name in AVERAGED:
             meta[f"{name}_final"] = (f"{long_name}: value at the last step", units)
