@@ -257,6 +257,15 @@ def test_swept_keys_are_the_settings_plus_config_keys_that_vary():
     for r, size in zip(cloth, ((40, 25), (64, 64)), strict=True):
         r.config["scene.cloths.0.resolution"] = size
     assert swept_keys(cloth)[-1] == "scene.cloths.0.resolution"
+    # a cloth key set otherwise in a scene without cloth (the fence) is no dimension ...
+    fence = rec(0.3, (8, 4, 4), 16)
+    fence.config["scene.cloths"] = ()
+    for r in (*cloth, fence):
+        r.config["cloth.self_collision"] = r is not fence
+    assert "cloth.self_collision" not in swept_keys([*cloth, fence])
+    # ... one that varies among runs with cloth is
+    cloth[0].config["cloth.self_collision"] = False
+    assert swept_keys([*cloth, fence])[-1] == "cloth.self_collision"
 
 
 def test_a_crossing_in_one_step_of_the_window_is_the_runs_peak_and_its_scenes():

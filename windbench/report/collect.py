@@ -527,7 +527,8 @@ def swept_keys(records: Sequence[RunRecord]) -> list[str]:
     A ``wind.*`` key of one backend (e.g. the particles' ``wind.lee_model``) counts when it
     takes more than one value among the runs that have it. A ``scene.*`` key counts only
     if it varies among runs of one scene (e.g. a swept ``scene.cloths.0.resolution``):
-    otherwise it follows from the scene's name."""
+    otherwise it follows from the scene's name. A ``cloth.*`` key counts only if it varies
+    among the runs whose scene has cloth: a scene without cloth has no use for it."""
     complete = [r for r in records if r.status in ("complete", "duplicate")]
     extra = []
     if complete:
@@ -547,9 +548,15 @@ def swept_keys(records: Sequence[RunRecord]) -> list[str]:
                 continue
             if key.startswith(IGNORED):
                 continue
-            if len({repr(r.config[key]) for r in complete}) > 1:
+            runs = [r for r in complete if _has_cloth(r)] if key.startswith("cloth.") else complete
+            if len({repr(r.config[key]) for r in runs}) > 1:
                 extra.append(key)
     return list(SETTINGS) + extra
+
+
+def _has_cloth(record: RunRecord) -> bool:
+    """Whether the run's scene has a cloth (a ``scene.cloths.<n>.*`` key in its config)."""
+    return any(k.startswith("scene.cloths.") for k in record.config)
 
 
 def _varies_within_a_scene(records: Sequence[RunRecord], key: str) -> bool:
