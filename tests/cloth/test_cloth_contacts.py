@@ -20,6 +20,7 @@ from windbench.cloth.self_contact import (
     close_pairs,
     leaf_pairs,
     pass_due,
+    pass_reach,
     patch_tree,
     push_edges,
     refit,
@@ -333,13 +334,32 @@ def test_a_layer_pushed_through_the_one_below_is_brought_back_by_a_second_pass()
     inv_mass = np.r_[np.full(3, 0.01), np.ones(3), np.zeros(3)]
     sc = self_contact_model(rest, tris, 0.005)
     one = p.copy()
-    assert self_contacts(sc, inv_mass, one, start, tree_fit(sc, 9)) > 0
+    assert self_contacts(sc, inv_mass, one, start, tree_fit(sc, 9), pass_reach(0.0, 0.005)) > 0
     assert self_intersections(sc, one) == 1 and one[3:6, 2].min() < -0.021
     fit = tree_fit(sc, 9)
     fit.anchor[:] = start
     self_contact_substep(sc, inv_mass, p, start, fit, True)
     assert fit.passes[0] == 2 and self_intersections(sc, p) == 0
     np.testing.assert_allclose(p[3:6, 2], -0.021 + 0.005, atol=1e-12)
+
+
+def test_a_triangle_that_passed_a_layer_faster_than_the_base_reach_is_brought_back():
+    """Thickness 5 mm, base reach 20 mm: a small triangle 10 mm above a pinned wide one at
+    the last pass is 30 mm below it now (a 40 mm move, a free edge whipping at 16 m/s for
+    a substep of 2.5 ms). The pass searches within 2 x 40 + 5 mm and puts it back on its
+    side at the thickness, +5 mm; within the base reach it would stay below."""
+    tris = np.arange(6).reshape(2, 3)
+    rest = np.vstack([_triangle(0.02, 0.04), _triangle(0.3, 0.0)])
+    start = np.vstack([_triangle(0.02, 0.01), _triangle(0.3, 0.0)])
+    p = np.vstack([_triangle(0.02, -0.03), _triangle(0.3, 0.0)])
+    inv_mass = np.r_[np.ones(3), np.zeros(3)]
+    sc = self_contact_model(rest, tris, 0.005)
+    assert pass_reach(0.04, 0.005) == pytest.approx(0.085)
+    fit = tree_fit(sc, 6)
+    fit.anchor[:] = start
+    self_contact_substep(sc, inv_mass, p, start, fit, True)
+    np.testing.assert_allclose(p[:3, 2], 0.005, atol=1e-12)
+    np.testing.assert_array_equal(p[3:], start[3:])
 
 
 def test_a_scene_without_cloth_has_an_empty_patch_tree():

@@ -6,16 +6,17 @@ of a scene are one mesh here (:class:`~windbench.cloth.model.ClothModel`), so on
 handles a flag folding on itself and two flags touching alike. It is thickness-based, not
 continuous: a vertex i closer than ``cloth.thickness`` to a triangle (a, b, c) it does not
 belong to, with its projection q = sum_k beta_k x_k inside the triangle, is pushed back to
-the thickness on the side it lay on at the start of the substep (sign s of its distance to
-the triangle's plane then):
+the thickness on the side it lay on at the last pass (sign s of its distance to the
+triangle's plane then):
 
     C = s (x_i - q) . n - thickness < 0,   den = w_i + sum_k beta_k^2 w_k,
     dx_i = -C w_i s n / den,   dx_k = C beta_k w_k s n / den.
 
-A vertex that crosses a triangle within one substep is thus brought back while it lies
-within REACH x thickness of the triangle's plane. Two edges that cross without a vertex near
-a triangle (a sheet draped over another's border) are kept apart the same way at their
-closest points (:func:`push_edges`, n = e1 x e2).
+A pass searches within max(REACH thickness, 2 d + thickness) of each plane, d the largest
+move of a vertex since the last pass: a vertex that crossed a triangle since then lies
+within 2 d of its plane, however fast the cloth moved. Edges that cross without a vertex
+near a triangle (a sheet draped over another's border) are kept apart the same way at
+their closest points (:func:`push_edges`, n = e1 x e2).
 
 Broad phase (:func:`leaf_pairs`): a fixed hierarchy of triangle patches
 (:func:`patch_tree`: median splits of the rest-pose centroids, leaves of at most LEAF
@@ -655,15 +656,15 @@ def _close_edges(tree, p, box, pairs, found, reach):
 
 
 @njit(cache=True)
-def self_contacts(sc, inv_mass, p, x0, fit):
-    """One pass of the contacts of the module docstring, each vertex and edge kept on the
-    side it lay on at ``x0`` (the substep's start): over the leaf patches that may touch
-    (:func:`leaf_pairs` after :func:`refit`, then :func:`close_pairs`), vertices against
-    triangles, then edges against edges. Returns the number of pairs it pushed apart."""
+def self_contacts(sc, inv_mass, p, x0, fit, reach):
+    """One pass of the contacts of the module docstring within ``reach`` (m,
+    :func:`pass_reach`), each vertex and edge kept on the side it lay on at ``x0`` (the
+    last pass's positions): over the leaf patches that may touch (:func:`leaf_pairs` after
+    :func:`refit`, then :func:`close_pairs`), vertices against triangles, then edges
+    against edges. Returns the number of pairs it pushed apart."""
     triangles, thickness, edges = sc.triangles, sc.thickness, sc.tree.leaf_edge
     if triangles.shape[0] == 0:
         return 0
-    reach = REACH * thickness
     refit(sc.tree, triangles, p, fit)
     pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_CONTACT, reach)
     vt, ee = close_pairs(sc, p, fit.box, pairs, found, reach)
@@ -680,23 +681,37 @@ def self_contacts(sc, inv_mass, p, x0, fit):
 
 
 @njit(cache=True)
+def largest_move(p, q):
+    """max_i |p_i - q_i| (m)."""
+    d2 = 0.0
+    for i in range(p.shape[0]):
+        dx, dy, dz = p[i, 0] - q[i, 0], p[i, 1] - q[i, 1], p[i, 2] - q[i, 2]
+        d2 = max(d2, dx * dx + dy * dy + dz * dz)
+    return math.sqrt(d2)
+
+
+@njit(cache=True)
+def pass_reach(moved, thickness):
+    """The search distance of a pass after the cloth moved at most ``moved`` since the last
+    one: REACH thickness, and at least 2 moved + thickness, so that a vertex or an edge that
+    crossed since then is found (module docstring)."""
+    return max(REACH * thickness, 2.0 * moved + thickness)
+
+
+@njit(cache=True)
 def pass_due(p, xp, anchor, thickness, last):
     """Whether :func:`self_contact_substep` must run the pass now: in the frame's ``last``
     substep, or when the cloth may have moved so far since the pass at ``anchor`` that a
-    crossing would leave the reach before the next substep. Two points moving at most d
-    each since the pass are at most 2 d closer, so a crossing still lies within
-    2 d + thickness of the plane; the pass runs when 2 (d + d_h) would exceed
-    (REACH - 1) thickness, d = max_i |p_i - anchor_i|, d_h = max_i |p_i - xp_i| (this
-    substep's move, the estimate of the next one's)."""
+    crossing would leave the base reach (REACH thickness) before the next substep: a later
+    pass still finds it (:func:`pass_reach`), but the sooner a crossing is undone, the
+    smaller the push. Two points moving at most d each since the pass are at most 2 d
+    closer; the pass runs when 2 (d + d_h) would exceed (REACH - 1) thickness,
+    d = max_i |p_i - anchor_i|, d_h = max_i |p_i - xp_i| (this substep's move, the
+    estimate of the next one's)."""
     if last:
         return True
-    d2 = dh2 = 0.0
-    for i in range(p.shape[0]):
-        ax, ay, az = p[i, 0] - anchor[i, 0], p[i, 1] - anchor[i, 1], p[i, 2] - anchor[i, 2]
-        hx, hy, hz = p[i, 0] - xp[i, 0], p[i, 1] - xp[i, 1], p[i, 2] - xp[i, 2]
-        d2 = max(d2, ax * ax + ay * ay + az * az)
-        dh2 = max(dh2, hx * hx + hy * hy + hz * hz)
-    return 2.0 * (math.sqrt(d2) + math.sqrt(dh2)) > (REACH - 1.0) * thickness
+    moved = largest_move(p, anchor) + largest_move(p, xp)
+    return 2.0 * moved > (REACH - 1.0) * thickness
 
 
 @njit(cache=True)
@@ -715,7 +730,8 @@ def self_contact_substep(sc, inv_mass, p, xp, fit, last):
     if pass_due(p, xp, fit.anchor, sc.thickness, last):
         for _ in range(PASS_SWEEPS):
             fit.passes[0] += 1
-            if self_contacts(sc, inv_mass, p, fit.anchor, fit) == 0:
+            reach = pass_reach(largest_move(p, fit.anchor), sc.thickness)
+            if self_contacts(sc, inv_mass, p, fit.anchor, fit, reach) == 0:
                 break
         fit.anchor[:] = p
 
