@@ -31,6 +31,11 @@ planes, then over the planes in order (:func:`ordered_sum`), so the numbers do n
 depend on the thread count. Without any pressure boundary the constant is removed from
 the right-hand side and each preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2,
 warm-started from the previous step's psi.
+
+The small per-cell and per-row helpers are plain compiled functions, which LLVM inlines
+into the loops. Numba's own inlining (``inline="always"``) typed a copy of each at every
+call site: the same numbers at the same speed for about twice this module's compile time
+(``experiments/compile_times.py``).
 """
 
 from __future__ import annotations
@@ -85,13 +90,13 @@ ROW_CONSTANT = 1  # each of the inner cells' six face weights the same all along
 GENERAL = 2  # the rest: rows cut by a body or by cloth, rows without an open face
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _cell_face_weights(wx, wy, wz, i, j, k):
     """The six face weights of cell (i, j, k): -x, +x, -y, +y, -z, +z."""
     return wx[i, j, k], wx[i + 1, j, k], wy[i, j, k], wy[i, j + 1, k], wz[i, j, k], wz[i, j, k + 1]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _row_neighbours(i, n, periodic):
     """(lower, upper) index of the rows beside row i on an axis of n rows, and a factor
     each, 1 where that neighbour exists (inside, or wrapped on a periodic axis) and 0 where
@@ -105,7 +110,7 @@ def _row_neighbours(i, n, periodic):
     return im, 1.0 if lower_in else 0.0, ip, 1.0 if upper_in else 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _neighbour_rows(x, periodic, i, j):
     """Views of the rows beside row (i, j, :) along x and y (-x, +x, -y, +y), and their
     factors (:func:`_row_neighbours`). One view expression each, with a computed index:
@@ -116,14 +121,14 @@ def _neighbour_rows(x, periodic, i, j):
     return x[im, j], x[ip, j], x[i, jm], x[i, jp], (fxm, fxp, fym, fyp)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _inner_rows(x, i, j):
     """Views of the rows beside an interior row (i, j, :) (0 < i < nx - 1, 0 < j < ny - 1):
     -x, +x, -y, +y, without a condition (the all-open rows' loops)."""
     return x[i - 1, j], x[i + 1, j], x[i, j - 1], x[i, j + 1]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wz, f, k):
     """(sum_f w_f x_nb, diag = sum_f w_f) at inner cell 0 < k < nz - 1 of a GENERAL row,
     from the row views of x and of the face weights (which carry the level's (h/H)^2
@@ -134,7 +139,7 @@ def _weighted_sum(xc, xm, xp, ym, yp, wxm, wxp, wym, wyp, wz, f, k):
     return s + w4 * xc[k - 1] + w5 * xc[k + 1], w0 + w1 + w2 + w3 + w4 + w5
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _end_sum(xc, xm, xp, ym, yp, ends, i, j, side):
     """(sum_f c_f x_nb, diag) at the end cell k = 0 (side 0) or k = nz - 1 (side 1) of row
     (i, j) from the compact table ``ends`` (:func:`classify_rows`: neighbour coefficients,
@@ -149,7 +154,7 @@ def _end_sum(xc, xm, xp, ym, yp, ends, i, j, side):
     return s, e[6]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _ends(nz):
     """How many distinct end cells a row of nz cells has (one when nz == 1)."""
     return 2 if nz > 1 else 1
@@ -243,7 +248,7 @@ def _operator_plane(x, b, level, i, out, residual):
         _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, i, j, residual)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _operator_row_ends(xc, bc, oc, xm, xp, ym, yp, ends, i, j, residual):
     """The end cells k = 0 and nz - 1 of row (i, j) for :func:`_operator_plane`."""
     sign = 1.0 if residual else -1.0
@@ -317,7 +322,7 @@ def _gs_plane(x, b, level, i, colour):
         _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _constant_row(x, b, i, j, colour):
     """Row (i, j) for the ALL_OPEN smoother loops: the first k of this colour, how many
     inner cells of it (k = 2 - first, 4 - first, ... < nz - 1: counted, since a stepped
@@ -360,7 +365,7 @@ def _constant_rows_sor(x, b, rows, ends, coef, i, colour):
             _gs_row_ends(xc, bc, am, ap, bm, bp, ends, i, j, first, coef[6])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
     """The end cells k = 0 and nz - 1 of row (i, j) if they have colour ``first``, from
     the views of the row and its neighbours."""
@@ -493,7 +498,7 @@ def ordered_sum(partial):
     return total
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _plane_dot(a, b, i):
     """sum a[i] b[i] over plane i, rows in order."""
     acc = 0.0
