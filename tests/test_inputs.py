@@ -26,6 +26,7 @@ TABLE = [
     (["wind=particles", "seed=-1"], "seed", "in [0, 4294967295]"),
     (["sim.duration=inf"], "sim.duration", "finite"),
     (["output.probe_points=3000"], "output.probe_points", "GiB"),
+    (["output.window_blocks=1"], "output.window_blocks", ">= 2"),
     (["output.filename=''"], "output.filename", "plain file name"),
     (["output.filename=../../escaped.nc"], "output.filename", "inside the run folder"),
     (["output.filename=.windbench.nc"], "output.filename", "no leading '.'"),

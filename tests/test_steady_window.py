@@ -88,3 +88,14 @@ def test_the_navier_stokes_fence_wake_recovers(run_config):
     assert float(ds.wake_distance.max()) >= 15
     assert float(wake.sel(wake_distance=10, wake_height=0.5)) >= 0.5
     assert float(wake.sel(wake_distance=2, wake_height=0.5)) < 0.5  # a lee behind the fence
+
+
+def test_the_dataset_keeps_the_probe_wind_of_each_block_of_the_steady_window(run_config):
+    """output.window_blocks=4 over the window of 14 steps (t = 1.35..2.0 s): four block
+    means of the probe wind; the global wind is steady, so each equals the window mean."""
+    _, ds = run_config([*EMPTY, "sim.duration=2", "output.window_blocks=4"])
+    blocks = ds["probe_wind_block_mean"]
+    assert blocks.dims == ("window_block", "probe_point", "component")
+    assert blocks.sizes["window_block"] == 4 and blocks.attrs["units"] == "m s-1"
+    for block in blocks.values:
+        np.testing.assert_allclose(block, ds["probe_wind_mean"].values, rtol=1e-12)

@@ -211,6 +211,13 @@ class OutputConfig:
     )
     frames: FramesConfig = field(default_factory=FramesConfig)
     probe_points: int = setting(6, "1", "lee/free-stream probe lattice: points per axis", ge=1)
+    window_blocks: int = setting(
+        4,
+        "1",
+        "equal blocks of the steady window whose probe-wind means give the sampling error "
+        "of its time mean (batch means)",
+        ge=2,
+    )
     filename: str = setting("windbench.nc", "", "dataset file name inside the run folder")
 
 

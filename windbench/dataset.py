@@ -69,6 +69,10 @@ VARIABLES: dict[str, tuple[str, str | None]] = {
     "step_cpu_seconds": ("CPU time of the process per step (all its threads)", "s"),
     "probe_wind": ("wind at the probe lattice points", "m s-1"),
     "probe_wind_mean": ("wind at the probe lattice points, mean over the steady window", "m s-1"),
+    "probe_wind_block_mean": (
+        "wind at the probe lattice points, mean over each of equal blocks of the steady window",
+        "m s-1",
+    ),
     "probe_points": ("probe lattice point positions", "m"),
     "cloth_triangles": ("cloth triangle vertex ids", "1"),
     "vertex_cloth": ("index of the cloth each vertex belongs to", "1"),
@@ -271,6 +275,12 @@ def _probes(ds: xr.Dataset, setup: RunSetup, rec: Recorder) -> xr.Dataset:
     count = rec.probe_count
     mean = rec.probe_sum / count if count else np.full((len(pts), 3), np.nan)
     ds["probe_wind_mean"] = (("probe_point", "component"), mean)
+    blocks = rec.block_count
+    if rec.block_sum is not None and blocks.all():  # every block of the window reached
+        ds["probe_wind_block_mean"] = (
+            ("window_block", "probe_point", "component"),
+            rec.block_sum / blocks[:, None, None],
+        )
     return ds
 
 

@@ -80,6 +80,11 @@ class RunSetup:
         """Simulated time at which recording starts (the end of the spin-up)."""
         return self.spinup_steps * self.dt
 
+    @property
+    def end_time(self) -> float:
+        """Simulated time of the last recorded step (the end of the steady window)."""
+        return (self.spinup_steps + self.n_steps) * self.dt
+
 
 def _require(cond: bool, key: str, message: str):
     if not cond:
@@ -172,6 +177,15 @@ def analysis_window(scene: Scene, start: float, end: float) -> tuple[float, floa
     if not np.isfinite(flow_through):
         return flow_through, start + 0.5 * (end - start)
     return flow_through, max(start, FLOW_THROUGHS * flow_through)
+
+
+def window_block(t: float, start: float, end: float, blocks: int) -> int:
+    """Which of ``blocks`` equal blocks of the steady window (start, end] time t is in:
+    ceil(blocks (t - start) / (end - start)) - 1, clipped to the blocks (t = start is in
+    the first). The block means give the time mean's sampling error (batch means,
+    :func:`windbench.report.lee.time_mean_error`)."""
+    fraction = (t - start) / (end - start) if end > start else 1.0
+    return min(blocks - 1, max(0, math.ceil(fraction * blocks - 1e-9) - 1))
 
 
 WINDOW_FLOW_THROUGHS = 1.0  # sim.duration=auto records this many flow-through times,
@@ -420,6 +434,8 @@ class Recorder:
         self.snap_probe: list[np.ndarray] = []
         self.probe_sum: np.ndarray | None = None  # probe wind summed over the steady window
         self.probe_count = 0
+        self.block_sum: np.ndarray | None = None  # the same per block of the window
+        self.block_count = np.zeros(int(setup.cfg.output.window_blocks), dtype=np.int64)
         self.frame_times: list[float] = []
         self.frame_data: dict[str, list[np.ndarray]] = {}
         self.load_average: dict[str, list[float]] = {}  # "start"/"end": 1, 5, 15 min
@@ -437,13 +453,20 @@ class Recorder:
         self.snap_probe.append(probe_wind)
 
     def accumulate_probes(self, t: float, probe_wind: np.ndarray):
-        """Add the probe wind of a step to the steady-window mean (t >= analysis_start)."""
+        """Add the probe wind of a step to the steady-window mean (t >= analysis_start) and
+        to the mean of its block of the window (:func:`window_block`)."""
         if t < self.setup.analysis_start - 1e-9:
             return
         if self.probe_sum is None:
             self.probe_sum = np.zeros_like(probe_wind)
+            self.block_sum = np.zeros((len(self.block_count), *probe_wind.shape))
         self.probe_sum += probe_wind
         self.probe_count += 1
+        block = window_block(
+            t, self.setup.analysis_start, self.setup.end_time, len(self.block_count)
+        )
+        self.block_sum[block] += probe_wind
+        self.block_count[block] += 1
 
     def frame(self, t: float, arrays: dict[str, np.ndarray]):
         """One animation frame: arrays named in :data:`windbench.dataset.FRAME_VARIABLES`."""

@@ -107,6 +107,7 @@ def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
         "seconds_per_step_median": "ms/step (median)",
         "wind_seconds_median": "wind ms/step",
         "lee_error": "lee error",
+        "lee_noise": "lee error's sampling noise",
         "divergence_rms": "divergence rms",
         "lee_force_ratio": "lee force ratio",
         "lee_speed_ratio": "lee speed ratio",
@@ -115,7 +116,9 @@ def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
     d["seconds_per_step_median"] = d["seconds_per_step_median"] * 1e3
     d["wind_seconds_median"] = d["wind_seconds_median"] * 1e3
     if "is_reference" in d:  # the reference's own error (0) would dilute the mean
-        d.loc[d["is_reference"].astype(bool), "lee_error"] = np.nan
+        errors = [c for c in ("lee_error", "lee_noise") if c in d]
+        d.loc[d["is_reference"].astype(bool), errors] = np.nan
+    cols = {k: v for k, v in cols.items() if k in d}
     g = d.groupby(["scene", "backend", "resolution"], sort=True)
     out = g[list(cols)].mean().rename(columns=cols)
     out.insert(0, "runs", g.size())
@@ -344,7 +347,11 @@ def _comparison_section(records, complete, refs: dict[str, Reference], place) ->
             "Navier-Stokes run with the second-order scheme, finer than every compared run, "
             "whose own uncertainty (the grid-convergence index of its two or three finest "
             "levels) is stated and drawn. A reference whose uncertainty exceeds the errors "
-            "it ranks is marked as not converged."
+            "it ranks is marked as not converged. Every time mean comes from a finite "
+            "window: the sampling noise beside e21 and each lee error is what two runs "
+            "with the same true mean would differ by from their windows alone (batch means "
+            "over the window's blocks); a difference not well above it is sampling, and a "
+            "longer window lowers it as 1/sqrt(window)."
         ),
         Table(C.reference_table(refs), "References and their uncertainty (fractions of U_ref)"),
         place(C.fig_accuracy_cost(table, refs)),

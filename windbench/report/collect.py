@@ -26,7 +26,8 @@ per-step variable (a backend's ``stats()``), ``*_final`` at the last step,
 excluded: it holds numba's compile or cache load), ``seconds_per_step_median`` and
 ``wind_seconds_median`` (medians over the window, robust to other processes),
 ``seconds_per_simulated_second`` (median step / dt); the lee probe wind averaged over the
-window (``probe_wind_mean``, for :mod:`windbench.report.lee`) and the window-mean wake
+window (``probe_wind_mean``, for :mod:`windbench.report.lee`) and over each block of it
+(``probe_wind_block_mean``, for the time mean's sampling error), the window-mean wake
 profile u/u0 (``wake_speed_ratio``). A run whose timings were taken while it shared its
 cores is ``contended`` (:func:`contention`); the cost fits leave it out.
 """
@@ -96,6 +97,7 @@ FIGURES: dict[str, tuple[str, str | None]] = {
     "steps_completed": ("steps recorded", "1"),
     "steps_planned": ("steps planned (sim.duration / sim.dt)", "1"),
     "lee_error": ("RMS wind error in the lee box against the reference / U_ref", "1"),
+    "lee_noise": ("sampling noise of lee_error from the finite steady windows / U_ref", "1"),
     "experiment": ("experiment of the run", None),
     "path": ("run dataset file", None),
     "code": ("code version that made the run", None),
@@ -121,6 +123,7 @@ class RunRecord:
     phases: dict = field(default_factory=dict)  # phase -> mean seconds per step
     lee_points: np.ndarray | None = None  # (n, 3) lee probe points
     lee_wind: np.ndarray | None = None  # (n, 3) wind there at the last snapshot
+    lee_block_wind: np.ndarray | None = None  # (blocks, n, 3) its means over window blocks
     free_stream_speed: float = math.nan  # mean |u| at the free-stream probes, last snapshot
     reference_speed: float = math.nan
     experiment: str = ""
@@ -351,6 +354,8 @@ def _probes(ds: xr.Dataset, rec: RunRecord):
     pts = np.asarray(ds["probe_points"].values, dtype=float)
     lee, free = box == "lee", box == "free_stream"
     rec.lee_points, rec.lee_wind = pts[lee], last[lee]
+    if "probe_wind_block_mean" in ds:
+        rec.lee_block_wind = np.asarray(ds["probe_wind_block_mean"].values, dtype=float)[:, lee]
     if free.any():
         rec.free_stream_speed = float(np.linalg.norm(last[free], axis=1).mean())
 

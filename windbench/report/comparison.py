@@ -122,6 +122,7 @@ def reference_table(refs: dict[str, Reference]) -> pd.DataFrame:
                 "scheme": ref.run.config.get("wind.advection"),
                 "levels": ", ".join(str(r.settings.get("resolution")) for r in ref.levels),
                 "e21": ref.difference,
+                "e21 sampling noise": ref.noise,
                 "order p": ref.order,
                 "p observed": ref.observed,
                 "GCI": ref.gci,

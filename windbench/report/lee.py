@@ -19,6 +19,17 @@ resolution ratio,
 p the order observed over three levels (ln(e32 / e21) / ln r, F_s = 1.25) or the scheme's
 formal order 2 with two levels (F_s = 3). A reference whose GCI exceeds the smallest
 error it ranks is flagged as not converged.
+
+A time mean over a finite window of a fluctuating wake is itself uncertain. With s_p the
+standard error of a run's window mean at probe p (batch means over the window's blocks,
+``probe_wind_block_mean``, :func:`time_mean_error`), two runs whose true means differ by
+d_p give E[lee_error^2] = mean_p |d_p|^2 / U_ref^2 + noise^2, with the sampling noise
+
+    noise = sqrt(mean_p (|s_run,p|^2 + |s_ref,p|^2)) / U_ref
+
+(``lee_noise`` per run, the reference's e21 beside its own): an error or an e21 not well
+above its noise is sampling, not model or grid, and a longer window lowers it as
+1 / sqrt(window).
 """
 
 from __future__ import annotations
@@ -50,6 +61,7 @@ class Reference:
     order: float = math.nan  # p used in the GCI
     observed: bool = False  # p observed over three levels (else the formal order)
     gci: float = math.nan  # uncertainty of the reference, fraction of U_ref
+    noise: float = math.nan  # sampling noise of e21 (module docstring)
     converged: bool | None = None  # GCI below the smallest error it ranks
 
     @property
@@ -131,30 +143,59 @@ def choose_references(
             continue
         levels = _levels(run, here)
         e21, order, observed, gci = grid_convergence(levels)
-        refs[scene] = Reference(scene, run, levels, e21, order, observed, gci)
+        noise = sampling_noise(levels[1], levels[0]) if len(levels) > 1 else math.nan
+        refs[scene] = Reference(scene, run, levels, e21, order, observed, gci, noise)
     return refs
 
 
-def lee_error(run: RunRecord, ref: RunRecord) -> float:
-    """RMS over common lee probe points of |u_run - u_ref|, divided by the reference speed."""
+def _matched(run: RunRecord, ref: RunRecord):
+    """(run's indices, reference's indices, U_ref) of the lee probe points both share, or
+    None when there are none or no reference speed."""
     if run.lee_points is None or ref.lee_points is None or len(ref.lee_points) == 0:
-        return math.nan
+        return None
     index = {tuple(p): i for i, p in enumerate(np.round(ref.lee_points, POINT_DECIMALS))}
     pairs = [
         (i, index[tuple(p)])
         for i, p in enumerate(np.round(run.lee_points, POINT_DECIMALS))
         if tuple(p) in index
     ]
-    if not pairs:
-        return math.nan
-    mine, theirs = np.asarray(pairs).T
-    diff = run.lee_wind[mine] - ref.lee_wind[theirs]
     u_free = ref.reference_speed
     if not (u_free > 0):
         u_free = ref.free_stream_speed  # a dataset without the attribute
-    if not (u_free > 0):
+    if not pairs or not (u_free > 0):
+        return None
+    mine, theirs = np.asarray(pairs).T
+    return mine, theirs, u_free
+
+
+def lee_error(run: RunRecord, ref: RunRecord) -> float:
+    """RMS over common lee probe points of |u_run - u_ref|, divided by the reference speed."""
+    matched = _matched(run, ref)
+    if matched is None:
         return math.nan
+    mine, theirs, u_free = matched
+    diff = run.lee_wind[mine] - ref.lee_wind[theirs]
     return float(np.sqrt(np.mean(np.sum(diff * diff, axis=1))) / u_free)
+
+
+def time_mean_error(block_means: np.ndarray) -> np.ndarray:
+    """Standard error of a window mean from the means of its B equal consecutive blocks
+    (axis 0), the batch-means estimate s = std(block means, ddof 1) / sqrt(B): unbiased
+    when a block is long against the flow's correlation time, too small when it is not."""
+    blocks = block_means.shape[0]
+    return block_means.std(axis=0, ddof=1) / math.sqrt(blocks)
+
+
+def sampling_noise(run: RunRecord, ref: RunRecord) -> float:
+    """The sampling noise of ``lee_error(run, ref)`` (module docstring); NaN when either
+    dataset has no window blocks."""
+    matched = _matched(run, ref)
+    if matched is None or run.lee_block_wind is None or ref.lee_block_wind is None:
+        return math.nan
+    mine, theirs, u_free = matched
+    s_run = time_mean_error(run.lee_block_wind)[mine]
+    s_ref = time_mean_error(ref.lee_block_wind)[theirs]
+    return float(np.sqrt(np.mean(np.sum(s_run**2 + s_ref**2, axis=1))) / u_free)
 
 
 def assign_lee_errors(records: Sequence[RunRecord], refs: dict[str, Reference]) -> None:
@@ -165,6 +206,7 @@ def assign_lee_errors(records: Sequence[RunRecord], refs: dict[str, Reference]) 
             continue
         ref = refs.get(rec.settings.get("scene"))
         rec.figures["lee_error"] = lee_error(rec, ref.run) if ref is not None else math.nan
+        rec.figures["lee_noise"] = sampling_noise(rec, ref.run) if ref is not None else math.nan
         rec.figures["is_reference"] = bool(ref is not None and ref.path == rec.path)
         rec.figures["reference_level"] = bool(
             ref is not None and any(r.path == rec.path for r in ref.levels)
