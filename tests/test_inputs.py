@@ -27,6 +27,7 @@ TABLE = [
     (["sim.duration=inf"], "sim.duration", "finite"),
     (["output.probe_points=3000"], "output.probe_points", "GiB"),
     (["output.window_blocks=1"], "output.window_blocks", ">= 2"),
+    (["sim.window_flow_throughs=0"], "sim.window_flow_throughs", "> 0"),
     (["output.filename=''"], "output.filename", "plain file name"),
     (["output.filename=../../escaped.nc"], "output.filename", "inside the run folder"),
     (["output.filename=.windbench.nc"], "output.filename", "no leading '.'"),

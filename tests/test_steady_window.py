@@ -11,7 +11,7 @@ import pytest
 from windbench.cli import compose_config
 from windbench.config import ConfigError
 from windbench.metrics import unsettled_reason
-from windbench.simulate import FLOW_THROUGHS, MIN_WINDOW, WINDOW_FLOW_THROUGHS, prepare
+from windbench.simulate import FLOW_THROUGHS, MIN_WINDOW, prepare
 
 EMPTY = ["scene=empty", "grid.resolution=8", "sim.dt=0.05"]  # 4 m at 6 m/s: T = 2/3 s
 
@@ -41,10 +41,13 @@ def test_auto_spin_up_is_two_flow_through_times():
 
 
 def test_auto_duration_records_one_flow_through_time_at_least_the_minimum():
-    """two_flags_wall: L = 24 m at U = 6 m/s, T = 4 s; the empty 4 m box: T = 2/3 s, so the
-    shortest window MIN_WINDOW applies."""
-    wall = prepare(compose_config(["scene=two_flags_wall", "sim.dt=0.05", "sim.duration=auto"]))
-    assert wall.n_steps * wall.dt == pytest.approx(WINDOW_FLOW_THROUGHS * 4.0)
+    """two_flags_wall: L = 24 m at U = 6 m/s, T = 4 s (2.5 T with sim.window_flow_throughs
+    = 2.5); the empty 4 m box: T = 2/3 s, so the shortest window MIN_WINDOW applies."""
+    keys = ["scene=two_flags_wall", "sim.dt=0.05", "sim.duration=auto"]
+    wall = prepare(compose_config(keys))
+    assert wall.n_steps * wall.dt == pytest.approx(4.0)
+    longer = prepare(compose_config([*keys, "sim.window_flow_throughs=2.5"]))
+    assert longer.n_steps * longer.dt == pytest.approx(10.0)
     empty = prepare(compose_config([*EMPTY, "sim.duration=auto"]))
     assert empty.n_steps * empty.dt == pytest.approx(max(MIN_WINDOW, 4.0 / 6.0))
 

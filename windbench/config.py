@@ -109,7 +109,15 @@ class SimConfig:
     duration: Any = setting(
         1.0,
         "s",
-        "simulated time recorded after the spin-up; auto: one flow-through time, at least 1 s",
+        "simulated time recorded after the spin-up; auto: sim.window_flow_throughs "
+        "flow-through times, at least 1 s",
+    )
+    window_flow_throughs: float = setting(
+        1.0,
+        "1",
+        "flow-through times sim.duration=auto records (the steady window: its time means' "
+        "sampling noise falls as 1/sqrt of it)",
+        gt=0,
     )
     max_steps: int = setting(
         100_000, "1", "largest step count (sim.duration / sim.dt) accepted", ge=1

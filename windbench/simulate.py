@@ -188,8 +188,7 @@ def window_block(t: float, start: float, end: float, blocks: int) -> int:
     return min(blocks - 1, max(0, math.ceil(fraction * blocks - 1e-9) - 1))
 
 
-WINDOW_FLOW_THROUGHS = 1.0  # sim.duration=auto records this many flow-through times,
-MIN_WINDOW = 1.0  # s, and at least this long (a scene without flow through: this long)
+MIN_WINDOW = 1.0  # s: sim.duration=auto records at least this long (without flow through: this)
 
 
 def _auto_spinup(scene: Scene) -> float:
@@ -199,13 +198,15 @@ def _auto_spinup(scene: Scene) -> float:
     return FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
 
 
-def _auto_duration(scene: Scene) -> float:
-    """``sim.duration=auto``: the steady window spans WINDOW_FLOW_THROUGHS flow-through
-    times, at least MIN_WINDOW. A time mean over a separated wake needs several of its
-    shedding periods (about H / (0.2 U) behind an obstacle of height H); one flow-through
-    time of a domain that reaches several H behind the obstacle holds them."""
+def _auto_duration(scene: Scene, flow_throughs: float) -> float:
+    """``sim.duration=auto``: the steady window spans ``flow_throughs``
+    (``sim.window_flow_throughs``) flow-through times, at least MIN_WINDOW. A time mean
+    over a separated wake needs several of its shedding periods (about H / (0.2 U) behind
+    an obstacle of height H), which one flow-through time of a domain reaching several H
+    behind the obstacle holds; its sampling noise (``lee_noise``) falls as
+    1 / sqrt(window)."""
     flow_through = flow_through_time(scene)
-    window = WINDOW_FLOW_THROUGHS * flow_through if np.isfinite(flow_through) else 0.0
+    window = flow_throughs * flow_through if np.isfinite(flow_through) else 0.0
     return max(window, MIN_WINDOW)
 
 
@@ -229,7 +230,8 @@ def _seconds(value, key: str, auto: float, positive: bool = False) -> float:
 def _recorded_steps(sim, scene: Scene) -> int:
     """Steps recorded after the spin-up: ``sim.duration / sim.dt``, at most ``sim.max_steps``."""
     dt = float(sim.dt)
-    duration = _seconds(sim.duration, "sim.duration", _auto_duration(scene), positive=True)
+    auto = _auto_duration(scene, float(sim.window_flow_throughs))
+    duration = _seconds(sim.duration, "sim.duration", auto, positive=True)
     _require(duration >= dt, "sim.duration", f"must be at least sim.dt = {dt} s, got {duration}")
     n_steps = int(round(duration / dt))
     _require(
