@@ -107,5 +107,6 @@ def test_the_reference_states_the_sampling_noise_of_its_e21():
     s_coarse = levels[1].lee_block_wind.std(axis=0, ddof=1) / 2.0
     by_hand = np.sqrt(np.mean(np.sum(s_fine**2 + s_coarse**2, axis=1))) / U_REF
     assert ref.noise == pytest.approx(by_hand, rel=1e-12)
+    assert sampling_noise(levels[0], levels[0]) == 0.0  # the reference against itself
     levels[0].lee_block_wind = None  # a dataset from before the window blocks
     assert math.isnan(sampling_noise(levels[1], levels[0]))

@@ -187,11 +187,13 @@ def time_mean_error(block_means: np.ndarray) -> np.ndarray:
 
 
 def sampling_noise(run: RunRecord, ref: RunRecord) -> float:
-    """The sampling noise of ``lee_error(run, ref)`` (module docstring); NaN when either
-    dataset has no window blocks."""
+    """The sampling noise of ``lee_error(run, ref)`` (module docstring): 0 for the
+    reference itself, NaN when either dataset has no window blocks."""
     matched = _matched(run, ref)
     if matched is None or run.lee_block_wind is None or ref.lee_block_wind is None:
         return math.nan
+    if run.path == ref.path:
+        return 0.0
     mine, theirs, u_free = matched
     s_run = time_mean_error(run.lee_block_wind)[mine]
     s_ref = time_mean_error(ref.lee_block_wind)[theirs]
