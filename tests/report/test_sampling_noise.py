@@ -13,7 +13,14 @@ import numpy as np
 import pytest
 
 from windbench.report.collect import RunRecord
-from windbench.report.lee import choose_references, lee_error, sampling_noise, time_mean_error
+from windbench.report.comparison import reference_table
+from windbench.report.lee import (
+    beyond_noise,
+    choose_references,
+    lee_error,
+    sampling_noise,
+    time_mean_error,
+)
 from windbench.simulate import Recorder, window_block
 
 U_REF = 6.0
@@ -96,8 +103,10 @@ def test_the_reference_states_the_sampling_noise_of_its_e21():
     points = rng.uniform(size=(20, 3))
     mean = rng.normal(size=points.shape)
     levels = [
-        _noisy_run(points, mean, 0.2 * k, rng, scene="fence", wind="navier_stokes", resolution=r)
-        for k, r in ((1, 128), (2, 64))
+        _noisy_run(
+            points, mean + k, 0.2 * k, rng, scene="fence", wind="navier_stokes", resolution=r
+        )
+        for k, r in ((1, 128), (2, 64))  # the coarse level 1 m/s off in each component
     ]
     for rec in levels:
         rec.config = {"wind.advection": "second_order"}
@@ -108,5 +117,9 @@ def test_the_reference_states_the_sampling_noise_of_its_e21():
     by_hand = np.sqrt(np.mean(np.sum(s_fine**2 + s_coarse**2, axis=1))) / U_REF
     assert ref.noise == pytest.approx(by_hand, rel=1e-12)
     assert sampling_noise(levels[0], levels[0]) == 0.0  # the reference against itself
+    row = reference_table({"fence": ref}).iloc[0]
+    assert row["e21 sampling noise"] == ref.noise
+    assert row["e21 beyond noise"] == pytest.approx(math.sqrt(ref.difference**2 - ref.noise**2))
+    assert beyond_noise(0.3, 0.5) == 0.0 and beyond_noise(0.5, 0.3) == pytest.approx(0.4)
     levels[0].lee_block_wind = None  # a dataset from before the window blocks
     assert math.isnan(sampling_noise(levels[1], levels[0]))

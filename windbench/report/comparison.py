@@ -17,7 +17,7 @@ from matplotlib.ticker import NullFormatter
 
 from windbench.report.collect import display_path
 from windbench.report.figures import Drawn, Missing, _color, _figure, timed
-from windbench.report.lee import Reference
+from windbench.report.lee import Reference, beyond_noise
 
 COST_X = "seconds_per_simulated_second"
 CPU_X = "cpu_seconds_per_simulated_second"
@@ -123,6 +123,7 @@ def reference_table(refs: dict[str, Reference]) -> pd.DataFrame:
                 "levels": ", ".join(str(r.settings.get("resolution")) for r in ref.levels),
                 "e21": ref.difference,
                 "e21 sampling noise": ref.noise,
+                "e21 beyond noise": beyond_noise(ref.difference, ref.noise),
                 "order p": ref.order,
                 "p observed": ref.observed,
                 "GCI": ref.gci,

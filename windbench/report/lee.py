@@ -200,6 +200,12 @@ def sampling_noise(run: RunRecord, ref: RunRecord) -> float:
     return float(np.sqrt(np.mean(np.sum(s_run**2 + s_ref**2, axis=1))) / u_free)
 
 
+def beyond_noise(error: float, noise: float) -> float:
+    """sqrt(max(error^2 - noise^2, 0)): the part of a lee difference its sampling noise
+    does not explain (module docstring; an estimate, as uncertain as the noise)."""
+    return math.sqrt(max(error * error - noise * noise, 0.0))
+
+
 def assign_lee_errors(records: Sequence[RunRecord], refs: dict[str, Reference]) -> None:
     """Store ``lee_error`` and the reference's role in each readable record's figures, and
     decide whether each reference is converged against the errors it ranks."""
