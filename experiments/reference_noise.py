@@ -1,0 +1,115 @@
+"""What a reference's e21 is made of: grid, window or geometry. For the Navier-Stokes runs
+of one scene at several resolutions (a reference sweep), every pair of levels gives its
+lee difference e (``lee_error`` of the coarser against the finer, fraction of U_ref), its
+sampling noise (``sampling_noise``: batch means over the window's blocks) and the part
+the noise leaves, sqrt(e^2 - noise^2) (:mod:`windbench.report.lee`).
+
+    PYTHONPATH=$PWD python experiments/reference_noise.py SWEEP... [--out CSV]
+
+e.g. ``experiment=reference scene=two_flags_wall grid.resolution=80,40`` once with the
+default window and once with ``sim.window_flow_throughs=4``, and the fence at the
+comparison's reference levels (64, 128, 256) beside levels whose cell size divides the
+fence's height, thickness and position (47, 94, 188 cells along its 47 m: h = 1, 0.5,
+0.25 m). Each run's row also gives the window (flow-through times), the lee box's mean
+wind along x and the top of the run's highest solid cell (a body fills the cells whose
+centres it holds, so a 2 m fence is 2.20 m tall at h = 0.73 m, 1.84 m at 0.37 m). Appends to
+``experiments/results/reference_noise.csv``: one row per pair, with the date and the
+runs' code version.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import itertools
+import math
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from windbench.report.collect import read_run
+from windbench.report.lee import beyond_noise, lee_error, sampling_noise
+
+OUT = Path(__file__).resolve().parent / "results" / "reference_noise.csv"
+COLUMNS = [
+    "date", "code", "scene", "fine", "coarse", "window_flow_throughs", "e", "noise",
+    "beyond_noise", "fine_lee_u", "coarse_lee_u", "fine_body_height", "coarse_body_height",
+    "folder",
+]  # fmt: skip
+
+
+def run_facts(path: Path) -> dict:
+    """Window (flow-through times), mean lee wind along x (m/s), solid height (m)."""
+    with xr.open_dataset(path) as ds:
+        lee = (ds["probe_box"] == "lee").values
+        window = float(ds.attrs["duration"]) / float(ds.attrs["flow_through_time"])
+        lee_u = float(ds["probe_wind_mean"].values[lee, 0].mean())
+    return {"window": window, "lee_u": lee_u, "height": solid_height(path)}
+
+
+def solid_height(path: Path) -> float:
+    """Top of the highest solid cell of the run's grid (m), from its config."""
+    from windbench.cli import compose_config
+    from windbench.simulate import prepare
+    from windbench.wind import make_wind
+
+    with xr.open_dataset(path) as ds:
+        scene, res = ds.attrs["scene"], int(ds.attrs["resolution"])
+    cfg = compose_config([f"scene={scene}", "wind=global", f"grid.resolution={res}"])
+    setup = prepare(cfg)
+    solid = make_wind(cfg.wind, setup.scene, setup.grid).solid_mask()
+    layers = np.flatnonzero(solid.any(axis=(0, 1)))
+    return float(setup.grid.lower[2] + (layers.max() + 1) * setup.grid.h) if len(layers) else 0.0
+
+
+def rows(folder: Path) -> list[dict]:
+    records = [read_run(p) for p in sorted(folder.glob("*/windbench.nc"))]
+    records = [r for r in records if r.status == "complete"]
+    records.sort(key=lambda r: -int(r.settings["resolution"]))
+    facts = {r.path: run_facts(r.path) for r in records}
+    out = []
+    for fine, coarse in itertools.combinations(records, 2):
+        e, noise = lee_error(coarse, fine), sampling_noise(coarse, fine)
+        a, b = facts[fine.path], facts[coarse.path]
+        out.append(
+            {
+                "date": datetime.now(UTC).date().isoformat(),
+                "code": fine.code,
+                "scene": fine.settings["scene"],
+                "fine": fine.settings["resolution"],
+                "coarse": coarse.settings["resolution"],
+                "window_flow_throughs": round(a["window"], 3),
+                "e": round(e, 4),
+                "noise": round(noise, 4),
+                "beyond_noise": round(beyond_noise(e, noise), 4) if math.isfinite(noise) else "",
+                "fine_lee_u": round(a["lee_u"], 3),
+                "coarse_lee_u": round(b["lee_u"], 3),
+                "fine_body_height": round(a["height"], 3),
+                "coarse_body_height": round(b["height"], 3),
+                "folder": folder.name,
+            }
+        )
+    return out
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("sweeps", nargs="+", type=Path)
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args(argv)
+    found = [row for folder in args.sweeps for row in rows(folder)]
+    for row in found:
+        print(", ".join(f"{k} {row[k]}" for k in COLUMNS[2:-1]))
+    new = not args.out.exists()
+    with args.out.open("a", newline="") as f:
+        writer = csv.DictWriter(f, COLUMNS, lineterminator="\n")
+        if new:
+            writer.writeheader()
+        writer.writerows(found)
+    print(f"appended {len(found)} rows to {args.out}")
+
+
+if __name__ == "__main__":
+    main()
