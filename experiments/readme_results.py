@@ -5,7 +5,9 @@
 Reads the report's ``summary.csv`` and ``references.csv`` and rewrites the block between
 ``<!-- results:start -->`` and ``<!-- results:end -->`` in README.md: per paper scene the
 lee error of each backend at the finest compared resolution against the scene's reference
-(mean over time steps and seeds), the reference's own uncertainty (GCI), the lee force
+(mean over time steps and seeds; ``± noise``: its sampling noise, where the runs kept
+their window blocks), the reference's own uncertainty (GCI; the sampling noise of its
+e21 beside it, where recorded), the lee force
 ratio of the sheltered flag, and the cost in wall seconds per simulated second; then how
 long the comparison's sweeps took (the last measurement of each in
 ``experiments/results/paper_comparison_time.csv``). Nothing in that block is written by hand.
@@ -32,6 +34,16 @@ def _fmt(x) -> str:
     return "–" if pd.isna(x) else f"{x:.3g}"
 
 
+def _noise(x) -> str:
+    return "" if x is None or pd.isna(x) else f" (e21 noise {_fmt(x)})"
+
+
+def _with_noise(runs: pd.DataFrame) -> str:
+    """Mean lee error of the runs, with their mean sampling noise where recorded."""
+    noise = runs["lee_noise"].mean() if "lee_noise" in runs else float("nan")
+    return _fmt(runs["lee_error"].mean()) + ("" if pd.isna(noise) else f" ± {_fmt(noise)}")
+
+
 def results_table(summary: pd.DataFrame, references: pd.DataFrame) -> str:
     done = summary[(summary["status"] == "complete") & ~summary["reference_level"].astype(bool)]
     mixing = done.get(LEE_MODEL, pd.Series("", index=done.index)).eq("mixing")
@@ -40,16 +52,19 @@ def results_table(summary: pd.DataFrame, references: pd.DataFrame) -> str:
         f"{b}: lee error / cost" for b in BACKENDS) + " | lee force ratio (global / particles / mixing / NS) |",
         "|---|---|" + "---|" * len(BACKENDS) + "---|"]  # fmt: skip
     gci = dict(zip(references["scene"], references["GCI"], strict=True))
+    noise = references.get("e21 sampling noise", pd.Series(dtype=float))
+    e21_noise = dict(zip(references["scene"], noise, strict=False))
     for scene, g in done.groupby("scene", sort=True):
         finest = g[g["resolution"] == g["resolution"].max()]
         cells, ratios = [], []
         for b in BACKENDS:
             run = finest[finest["backend"] == b]
-            cells.append(f"{_fmt(run['lee_error'].mean())} / {_fmt(run['cost'].median())} s")
+            cells.append(f"{_with_noise(run)} / {_fmt(run['cost'].median())} s")
             ratios.append(_fmt(run["lee_force_ratio"].mean()))
         res = int(finest["resolution"].iloc[0])
         rows.append(
-            f"| {scene} ({res} cells) | {_fmt(gci.get(scene))} | " + " | ".join(cells)
+            f"| {scene} ({res} cells) | {_fmt(gci.get(scene))}{_noise(e21_noise.get(scene))} | "
+            + " | ".join(cells)
             + f" | {' / '.join(ratios)} |"
         )  # fmt: skip
     return "\n".join(rows)
