@@ -2,7 +2,11 @@
 of one scene at several resolutions (a reference sweep), every pair of levels gives its
 lee difference e (``lee_error`` of the coarser against the finer, fraction of U_ref), its
 sampling noise (``sampling_noise``: batch means over the window's blocks) and the part
-the noise leaves, sqrt(e^2 - noise^2) (:mod:`windbench.report.lee`).
+the noise leaves, sqrt(e^2 - noise^2) (:mod:`windbench.report.lee`). ``noise_by_blocks``
+gives the noise again with the recorded blocks merged pairwise (16, 8, 4 blocks from
+``output.window_blocks=16``): batch means is too small while a block is shorter than the
+flow's correlation time, so a noise that still grows as the blocks get longer is a lower
+bound (Flyvbjerg and Petersen 1989).
 
     PYTHONPATH=$PWD python experiments/reference_noise.py SWEEP... [--out CSV]
 
@@ -23,6 +27,7 @@ import argparse
 import csv
 import itertools
 import math
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -35,7 +40,7 @@ from windbench.report.lee import beyond_noise, lee_error, sampling_noise
 OUT = Path(__file__).resolve().parent / "results" / "reference_noise.csv"
 COLUMNS = [
     "date", "code", "scene", "fine", "coarse", "window_flow_throughs", "e", "noise",
-    "beyond_noise", "fine_lee_u", "coarse_lee_u", "fine_body_height", "coarse_body_height",
+    "beyond_noise", "noise_by_blocks", "fine_lee_u", "coarse_lee_u", "fine_body_height", "coarse_body_height",
     "folder",
 ]  # fmt: skip
 
@@ -64,6 +69,24 @@ def solid_height(path: Path) -> float:
     return float(setup.grid.lower[2] + (layers.max() + 1) * setup.grid.h) if len(layers) else 0.0
 
 
+def noise_by_blocks(coarse, fine) -> str:
+    """'B: noise; ...' for the recorded blocks merged pairwise while at least 4 remain."""
+    parts, a, b = [], coarse.lee_block_wind, fine.lee_block_wind
+    while a is not None and b is not None and len(a) == len(b) and len(a) >= 4:
+        merged = [replace(coarse, lee_block_wind=a), replace(fine, lee_block_wind=b)]
+        parts.append(f"{len(a)}: {sampling_noise(*merged):.4f}")
+        if len(a) % 2:
+            break
+        a, b = _pairs(a), _pairs(b)
+    return "; ".join(parts)
+
+
+def _pairs(blocks: np.ndarray) -> np.ndarray:
+    """Means of consecutive pairs of block means (the blocks hold equal step counts to
+    within one step)."""
+    return 0.5 * (blocks[0::2] + blocks[1::2])
+
+
 def rows(folder: Path) -> list[dict]:
     records = [read_run(p) for p in sorted(folder.glob("*/windbench.nc"))]
     records = [r for r in records if r.status == "complete"]
@@ -84,6 +107,7 @@ def rows(folder: Path) -> list[dict]:
                 "e": round(e, 4),
                 "noise": round(noise, 4),
                 "beyond_noise": round(beyond_noise(e, noise), 4) if math.isfinite(noise) else "",
+                "noise_by_blocks": noise_by_blocks(coarse, fine),
                 "fine_lee_u": round(a["lee_u"], 3),
                 "coarse_lee_u": round(b["lee_u"], 3),
                 "fine_body_height": round(a["height"], 3),
