@@ -24,7 +24,6 @@ runs' code version.
 from __future__ import annotations
 
 import argparse
-import csv
 import itertools
 import math
 from dataclasses import replace
@@ -34,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from experiments.rows import append_rows
 from windbench.report.collect import read_run
 from windbench.report.lee import beyond_noise, lee_error, sampling_noise
 
@@ -126,12 +126,7 @@ def main(argv=None) -> None:
     found = [row for folder in args.sweeps for row in rows(folder)]
     for row in found:
         print(", ".join(f"{k} {row[k]}" for k in COLUMNS[2:-1]))
-    new = not args.out.exists()
-    with args.out.open("a", newline="") as f:
-        writer = csv.DictWriter(f, COLUMNS, lineterminator="\n")
-        if new:
-            writer.writeheader()
-        writer.writerows(found)
+    append_rows(args.out, found, COLUMNS)
     print(f"appended {len(found)} rows to {args.out}")
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import atexit
-import csv
 import json
 import os
 import re
@@ -30,6 +29,7 @@ from collections import defaultdict
 from datetime import UTC, datetime
 from pathlib import Path
 
+from experiments.rows import append_rows
 from windbench.dataset import git_commit
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -96,13 +96,7 @@ def main() -> None:
         clock = re.search(r"in ([\d.]+)s", done.stdout.splitlines()[-1] if done.stdout else "")
         print(done.stdout.splitlines()[-1] if done.stdout else done.stderr[-500:])
         rows = _rows(Path(logs), wall, cpu, float(clock.group(1)) if clock else float("nan"))
-    fields = list(rows[-1])  # the TOTAL row has every column
-    new = not args.out.exists()
-    with args.out.open("a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=fields, lineterminator="\n")
-        if new:
-            writer.writeheader()
-        writer.writerows(rows)
+    append_rows(args.out, rows, list(rows[-1]))  # the TOTAL row has every column
     print(f"wrote {args.out}: {rows[-1]}")
 
 

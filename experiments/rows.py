@@ -1,0 +1,18 @@
+"""Appending measured rows to a results CSV (``experiments/results/*.csv``)."""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Sequence
+from pathlib import Path
+
+
+def append_rows(path: Path, rows: Sequence[dict], fields: Sequence[str]) -> None:
+    """Append ``rows`` (dicts keyed by ``fields``) to the CSV at ``path``, with the header
+    first when the file is new; one line ending, so the file diffs cleanly."""
+    new = not path.exists()
+    with path.open("a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(fields), lineterminator="\n")
+        if new:
+            writer.writeheader()
+        writer.writerows(rows)
