@@ -9,6 +9,10 @@ flow's correlation time, so a noise that still grows as the blocks get longer is
 bound (Flyvbjerg and Petersen 1989).
 
     PYTHONPATH=$PWD python experiments/reference_noise.py SWEEP... [--out CSV]
+    PYTHONPATH=$PWD python experiments/reference_noise.py RUNS... --against REFERENCE
+
+The second form gives the same for every run under RUNS against the finest run under
+REFERENCE: what a compared run's lee error is made of.
 
 e.g. ``experiment=reference scene=two_flags_wall grid.resolution=80,40`` once with the
 default window and once with ``sim.window_flow_throughs=4``, and the fence at the
@@ -39,7 +43,7 @@ from windbench.report.lee import beyond_noise, lee_error, sampling_noise
 
 OUT = Path(__file__).resolve().parent / "results" / "reference_noise.csv"
 COLUMNS = [
-    "date", "code", "scene", "fine", "coarse", "window_flow_throughs", "e", "noise",
+    "date", "code", "scene", "fine", "coarse", "coarse_model", "window_flow_throughs", "e", "noise",
     "beyond_noise", "noise_by_blocks", "fine_lee_u", "coarse_lee_u", "fine_body_height", "coarse_body_height",
     "folder",
 ]  # fmt: skip
@@ -87,43 +91,66 @@ def _pairs(blocks: np.ndarray) -> np.ndarray:
     return 0.5 * (blocks[0::2] + blocks[1::2])
 
 
-def rows(folder: Path) -> list[dict]:
+def _complete(folder: Path) -> list:
     records = [read_run(p) for p in sorted(folder.glob("*/windbench.nc"))]
-    records = [r for r in records if r.status == "complete"]
-    records.sort(key=lambda r: -int(r.settings["resolution"]))
-    facts = {r.path: run_facts(r.path) for r in records}
-    out = []
-    for fine, coarse in itertools.combinations(records, 2):
-        e, noise = lee_error(coarse, fine), sampling_noise(coarse, fine)
-        a, b = facts[fine.path], facts[coarse.path]
-        out.append(
-            {
-                "date": datetime.now(UTC).date().isoformat(),
-                "code": fine.code,
-                "scene": fine.settings["scene"],
-                "fine": fine.settings["resolution"],
-                "coarse": coarse.settings["resolution"],
-                "window_flow_throughs": round(a["window"], 3),
-                "e": round(e, 4),
-                "noise": round(noise, 4),
-                "beyond_noise": round(beyond_noise(e, noise), 4) if math.isfinite(noise) else "",
-                "noise_by_blocks": noise_by_blocks(coarse, fine),
-                "fine_lee_u": round(a["lee_u"], 3),
-                "coarse_lee_u": round(b["lee_u"], 3),
-                "fine_body_height": round(a["height"], 3),
-                "coarse_body_height": round(b["height"], 3),
-                "folder": folder.name,
-            }
-        )
-    return out
+    return [r for r in records if r.status == "complete"]
+
+
+def _model(rec) -> str:
+    """The run's wind model: backend and its lee model or advection scheme."""
+    c = rec.config
+    return " ".join(
+        str(x)
+        for x in (c.get("wind.name"), c.get("wind.lee_model") or c.get("wind.advection"))
+        if x
+    )
+
+
+def pair_row(fine, coarse, facts: dict, folder: Path) -> dict:
+    """The row of ``coarse`` against ``fine`` (module docstring)."""
+    e, noise = lee_error(coarse, fine), sampling_noise(coarse, fine)
+    a, b = facts[fine.path], facts[coarse.path]
+    return {
+        "date": datetime.now(UTC).date().isoformat(),
+        "code": coarse.code,
+        "scene": fine.settings["scene"],
+        "fine": fine.settings["resolution"],
+        "coarse": coarse.settings["resolution"],
+        "coarse_model": _model(coarse),
+        "window_flow_throughs": round(b["window"], 3),
+        "e": round(e, 4),
+        "noise": round(noise, 4),
+        "beyond_noise": round(beyond_noise(e, noise), 4) if math.isfinite(noise) else "",
+        "noise_by_blocks": noise_by_blocks(coarse, fine),
+        "fine_lee_u": round(a["lee_u"], 3),
+        "coarse_lee_u": round(b["lee_u"], 3),
+        "fine_body_height": round(a["height"], 3),
+        "coarse_body_height": round(b["height"], 3),
+        "folder": folder.name,
+    }
+
+
+def rows(folder: Path, against: Path | None = None) -> list[dict]:
+    """Every pair of levels in ``folder``; with ``against``, every run in ``folder``
+    against the finest run there (the reference)."""
+    records = _complete(folder)
+    if against is None:
+        records.sort(key=lambda r: -int(r.settings["resolution"]))
+        pairs = list(itertools.combinations(records, 2))
+    else:
+        ref = max(_complete(against), key=lambda r: int(r.settings["resolution"]))
+        pairs = [(ref, r) for r in records]
+    facts = {r.path: run_facts(r.path) for pair in pairs for r in pair}
+    return [pair_row(fine, coarse, facts, folder) for fine, coarse in pairs]
 
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("sweeps", nargs="+", type=Path)
+    parser.add_argument("--against", type=Path, help="a reference sweep: each run against it")
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args(argv)
-    found = [row for folder in args.sweeps for row in rows(folder)]
+    found = [row for folder in args.sweeps for row in rows(folder, args.against)]
     for row in found:
         print(", ".join(f"{k} {row[k]}" for k in COLUMNS[2:-1]))
     append_rows(args.out, found, COLUMNS)
