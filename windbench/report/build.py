@@ -116,9 +116,7 @@ def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
     d["seconds_per_step_median"] = d["seconds_per_step_median"] * 1e3
     d["wind_seconds_median"] = d["wind_seconds_median"] * 1e3
     if "is_reference" in d:  # the reference's own error (0) would dilute the mean
-        errors = [c for c in ("lee_error", "lee_noise") if c in d]
-        d.loc[d["is_reference"].astype(bool), errors] = np.nan
-    cols = {k: v for k, v in cols.items() if k in d}
+        d.loc[d["is_reference"].astype(bool), ["lee_error", "lee_noise"]] = np.nan
     g = d.groupby(["scene", "backend", "resolution"], sort=True)
     out = g[list(cols)].mean().rename(columns=cols)
     out.insert(0, "runs", g.size())
