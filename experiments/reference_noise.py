@@ -91,12 +91,12 @@ def _pairs(blocks: np.ndarray) -> np.ndarray:
     return 0.5 * (blocks[0::2] + blocks[1::2])
 
 
-def _complete(folder: Path) -> list:
+def complete_runs(folder: Path) -> list:
     records = [read_run(p) for p in sorted(folder.glob("*/windbench.nc"))]
     return [r for r in records if r.status == "complete"]
 
 
-def _model(rec) -> str:
+def wind_model(rec) -> str:
     """The run's wind model: backend and its lee model or advection scheme."""
     c = rec.config
     return " ".join(
@@ -116,7 +116,7 @@ def pair_row(fine, coarse, facts: dict, folder: Path) -> dict:
         "scene": fine.settings["scene"],
         "fine": fine.settings["resolution"],
         "coarse": coarse.settings["resolution"],
-        "coarse_model": _model(coarse),
+        "coarse_model": wind_model(coarse),
         "window_flow_throughs": round(b["window"], 3),
         "e": round(e, 4),
         "noise": round(noise, 4),
@@ -133,12 +133,12 @@ def pair_row(fine, coarse, facts: dict, folder: Path) -> dict:
 def rows(folder: Path, against: Path | None = None) -> list[dict]:
     """Every pair of levels in ``folder``; with ``against``, every run in ``folder``
     against the finest run there (the reference)."""
-    records = _complete(folder)
+    records = complete_runs(folder)
     if against is None:
         records.sort(key=lambda r: -int(r.settings["resolution"]))
         pairs = list(itertools.combinations(records, 2))
     else:
-        ref = max(_complete(against), key=lambda r: int(r.settings["resolution"]))
+        ref = max(complete_runs(against), key=lambda r: int(r.settings["resolution"]))
         pairs = [(ref, r) for r in records]
     facts = {r.path: run_facts(r.path) for pair in pairs for r in pair}
     return [pair_row(fine, coarse, facts, folder) for fine, coarse in pairs]

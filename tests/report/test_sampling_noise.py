@@ -18,6 +18,7 @@ from windbench.report.lee import (
     beyond_noise,
     choose_references,
     lee_error,
+    lee_error_by_height,
     sampling_noise,
     time_mean_error,
 )
@@ -75,6 +76,24 @@ def _noisy_run(points, mean, spread, rng, blocks=4, **settings):
     rec.lee_points, rec.reference_speed = points, U_REF
     rec.lee_block_wind, rec.lee_wind = block_wind, block_wind.mean(axis=0)
     return rec
+
+
+def test_the_lee_error_splits_by_height_into_parts_that_sum_to_its_square():
+    """A run that differs from its reference by 3 m/s along x at one of five heights only:
+    that height holds all of lee_error^2 = (3 / U)^2 / 5, the means are the two winds'."""
+    rng = np.random.default_rng(5)
+    g = np.linspace(0.1, 0.9, 5)
+    points = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    ref = _noisy_run(points, rng.normal(size=points.shape), 0.0, rng)
+    shifted = ref.lee_wind.copy()
+    shifted[points[:, 2] == g[3], 0] -= 3.0
+    run = _noisy_run(points, shifted, 0.0, rng)
+    parts = lee_error_by_height(run, ref)
+    assert [z for z, *_ in parts] == pytest.approx(g)
+    assert [p for *_, p in parts] == pytest.approx([0, 0, 0, (3.0 / U_REF) ** 2 / 5, 0])
+    assert sum(p for *_, p in parts) == pytest.approx(lee_error(run, ref) ** 2)
+    at = points[:, 2] == g[3]
+    assert parts[3][1:3] == pytest.approx((shifted[at, 0].mean(), ref.lee_wind[at, 0].mean()))
 
 
 def test_the_sampling_noise_is_the_lee_error_of_runs_with_the_same_true_mean():

@@ -122,7 +122,7 @@ class RunRecord:
     figures: dict = field(default_factory=dict)  # scalar figures
     phases: dict = field(default_factory=dict)  # phase -> mean seconds per step
     lee_points: np.ndarray | None = None  # (n, 3) lee probe points
-    lee_wind: np.ndarray | None = None  # (n, 3) wind there at the last snapshot
+    lee_wind: np.ndarray | None = None  # (n, 3) wind there: window mean (:func:`_probes`)
     lee_block_wind: np.ndarray | None = None  # (blocks, n, 3) its means over window blocks
     free_stream_speed: float = math.nan  # mean |u| at the free-stream probes, last snapshot
     reference_speed: float = math.nan

@@ -178,6 +178,25 @@ def lee_error(run: RunRecord, ref: RunRecord) -> float:
     return float(np.sqrt(np.mean(np.sum(diff * diff, axis=1))) / u_free)
 
 
+def lee_error_by_height(run: RunRecord, ref: RunRecord) -> list[tuple[float, ...]]:
+    """Where in the lee box a lee error comes from: per probe height z (m) of the common
+    lee points, (z, the run's mean wind along x there, the reference's (m/s), that
+    height's part of lee_error^2). The parts sum to ``lee_error(run, ref)**2``."""
+    matched = _matched(run, ref)
+    if matched is None:
+        return []
+    mine, theirs, u_free = matched
+    u_run, u_ref = run.lee_wind[mine], ref.lee_wind[theirs]
+    diff = u_run - u_ref
+    part = np.sum(diff * diff, axis=1) / (u_free * u_free * len(mine))
+    z = np.round(ref.lee_points[theirs, 2], POINT_DECIMALS)
+    return [
+        (float(h), float(u_run[z == h, 0].mean()), float(u_ref[z == h, 0].mean()))
+        + (float(part[z == h].sum()),)
+        for h in np.unique(z)
+    ]
+
+
 def time_mean_error(block_means: np.ndarray) -> np.ndarray:
     """Standard error of a window mean from the means of its B equal consecutive blocks
     (axis 0), the batch-means estimate s = std(block means, ddof 1) / sqrt(B): unbiased
