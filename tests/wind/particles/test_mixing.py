@@ -245,6 +245,8 @@ def test_same_seed_same_field_other_seed_other_field():
         "wind.mixing_length_limit=-1",
         "wind.recirculation_backflow=1.5",
         "wind.wake_mixing=-0.1",
+        "wind.recirculation_exponent=0.5",
+        "wind.recirculation_height=0",
     ],
 )
 def test_bad_mixing_settings_name_the_key(override):

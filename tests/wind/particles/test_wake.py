@@ -14,11 +14,13 @@ from tests.wind.particles.test_mixing import LOG_WIND, walled_scene
 from windbench.cli import compose_config
 from windbench.scenes import build_scene
 from windbench.wind.particles.wake import (
+    CAVITY,
     LENGTH,
     N_HI,
     N_LO,
     SPEED,
     TOP,
+    Eddy,
     eddy_wind,
     fackrell_length,
     in_cavity,
@@ -32,9 +34,9 @@ BACKFLOW, MIXING = 0.3, 0.05
 WALL = {"type": "box", "min": [2.0, 0.0, 0.0], "max": [2.5, 2.0, 1.5]}  # across the channel
 
 
-def wall_rows(backflow=BACKFLOW, mixing=MIXING):
+def wall_rows(backflow=BACKFLOW, mixing=MIXING, exponent=2.0, height=1.0):
     scene = walled_scene([LOG_WIND], [WALL])
-    return scene, wake_rows(scene, np.zeros(3), backflow, mixing)
+    return scene, wake_rows(scene, np.zeros(3), Eddy(backflow, mixing, exponent, height))
 
 
 def test_fackrell_length_at_its_published_limits():
@@ -46,23 +48,27 @@ def test_fackrell_length_at_its_published_limits():
 
 def test_boxes_spanning_or_touching_closed_sides_have_wide_wakes():
     fence = build_scene(compose_config(["scene=fence"]).scene)
-    (row,) = wake_rows(fence, np.zeros(3), BACKFLOW, MIXING)
+    (row,) = wake_rows(fence, np.zeros(3), Eddy(BACKFLOW, MIXING, 2.0, 1.0))
     assert row[N_LO] == -np.inf and row[N_HI] == np.inf  # periodic span: a 2-D fence
     assert row[LENGTH] == pytest.approx(fackrell_length(2.0, 1.0, np.inf))
     assert row[SPEED] == pytest.approx(6.0 * np.log(2.0 / 0.1) / np.log(10.0 / 0.1))
     walled = build_scene(compose_config(["scene=two_flags_wall"]).scene)
-    (row,) = wake_rows(walled, np.zeros(3), BACKFLOW, MIXING)  # the poles are not resolved
+    (row,) = wake_rows(
+        walled, np.zeros(3), Eddy(BACKFLOW, MIXING, 2.0, 1.0)
+    )  # the poles are not resolved
     assert (row[N_LO], row[N_HI]) == (2.0, np.inf)  # its side at y = 4 is a slip wall
     assert row[LENGTH] == pytest.approx(fackrell_length(3.0, 1.0, 4.0))  # W mirrored
     assert row[SPEED] == 6.0
 
 
-def test_the_eddy_is_divergence_free_and_closed():
+@pytest.mark.parametrize("exponent, height", [(2.0, 1.0), (10.0, 1.3)])
+def test_the_eddy_is_divergence_free_and_closed(exponent, height):
     """psi = 0 on the floor, the lee face and the edge: zero net flux through every plane
     across the wind, none through the lee face; div u = 0 inside (central differences)."""
-    _, rows = wall_rows()
+    _, rows = wall_rows(exponent=exponent, height=height)
     (row,) = rows
-    length, top = row[LENGTH], row[TOP]
+    length, top = row[LENGTH], row[CAVITY]
+    assert top == pytest.approx(height * row[TOP])
     for xi in (0.1, 1 / 3, 0.6, 0.9):
         s = 2.5 + xi * length
         h = top * np.sqrt(1.0 - xi * xi)  # the cavity's height there
@@ -96,6 +102,11 @@ def test_the_backflow_peaks_at_the_floor_a_third_along_the_cavity():
     assert eddy_wind(rows, (s, 1.0, h / np.sqrt(5.0)), 0.0)[0] == pytest.approx(0.0, abs=1e-12)
     assert eddy_wind(rows, (s, 1.0, 0.8 * h), 0.0)[0] > 0.0  # the return flow above
     assert eddy_wind(rows, (1.0, 1.0, 0.2), 0.0) == (0.0, 0.0, 0.0)  # upwind: none
+    _, tall = wall_rows(exponent=10.0, height=1.3)  # backflow up to 21^(-1/10) h = 0.738 h
+    h = 1.3 * h
+    assert eddy_wind(tall, (s, 1.0, 1e-9), 0.0)[0] == pytest.approx(-BACKFLOW * row[SPEED])
+    assert eddy_wind(tall, (s, 1.0, 21**-0.1 * h), 0.0)[0] == pytest.approx(0.0, abs=1e-12)
+    assert eddy_wind(tall, (s, 1.0, 0.7 * h), 0.0)[0] < 0.0 < eddy_wind(tall, (s, 1, 0.8 * h), 0)[0]
     _, calm = wall_rows(backflow=0.0)
     assert eddy_wind(calm, (s, 1.0, 0.2), 0.0) == (0.0, 0.0, 0.0)
 
@@ -113,7 +124,7 @@ def test_the_cavity_edge_reflects_particles_across_it_without_moving_them_downwi
             assert q == tuple(p)
             continue
         assert not in_cavity(rows, q, 0.0) and q[:2] == tuple(p[:2])
-        edge = row[TOP] * np.sqrt(1.0 - ((p[0] - 2.5) / row[LENGTH]) ** 2)
+        edge = row[CAVITY] * np.sqrt(1.0 - ((p[0] - 2.5) / row[LENGTH]) ** 2)
         assert q[2] - edge == pytest.approx(edge - p[2])  # as deep outside as inside
 
 

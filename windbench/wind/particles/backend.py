@@ -139,6 +139,16 @@ class ParticleConfig(WindConfig):
     wake_mixing: float = setting(
         0.05, "1", "mixing lee: wake eddy diffusivity over (wind at the box's top x height)", ge=0
     )
+    recirculation_exponent: float = setting(
+        2.0,
+        "1",
+        "mixing lee: m of the wake eddy's profile (1 - (z/h)^m)^2; backflow below (2m+1)^(-1/m) h",
+        ge=1,
+        le=50,
+    )
+    recirculation_height: float = setting(
+        1.0, "1", "mixing lee: the wake cavity's height over the box's height", ge=0.5, le=3
+    )
     seed: int = setting(0, "1", "random seed (conf/wind/particles.yaml sets ${seed})", ge=0)
 
 

@@ -55,6 +55,7 @@ from windbench.wind.particles.tracing import (
     first_triangle_hit,
 )
 from windbench.wind.particles.wake import (
+    Eddy,
     eddy_field,
     leave_cavity,
     wake_diffusivity,
@@ -191,12 +192,13 @@ def mixing_lee(scene, grid, params, emitters) -> MixingLee:
     check_sources(scene, emission_specs(scene))
     k, z_first, dz = diffusivity_table(scene, grid, float(params.mixing_length_limit))
     lower, upper = np.asarray(grid.lower, float), np.asarray(grid.upper, float)
-    wakes = wake_rows(
-        scene,
-        lower,
+    near_wake = Eddy(
         float(params.recirculation_backflow),
         float(params.wake_mixing),
+        float(params.recirculation_exponent),
+        float(params.recirculation_height),
     )
+    wakes = wake_rows(scene, lower, near_wake)
     eddy = eddy_field(wakes, lower, float(grid.h), tuple(int(n) for n in grid.shape))
     tables = MixingModel(k, z_first, dz, face_actions(scene), int(params.seed), wakes, lower[2])
     density = np.array(

@@ -11,19 +11,23 @@ its length after Fackrell (1984, J. Wind Eng. Ind. Aerodyn. 16, 97),
     L_R / H = 1.8 (W / H) / ((L / H)^0.3 (1 + 0.24 W / H))   (2-D limit: 7.5 (L/H)^-0.3),
 
 W taken twice across a wall or periodic face it touches, unbounded if it touches both.
-The outer flow goes around the cavity as around a body (a particle that ends a step in it
-is mirrored out across its nearest edge, top or side, never along the wind, so its flux
-passes around) and the cells add to their wind the closed eddy of the stream function (xi = s / L_R, h(xi) = H sqrt(1 - xi^2), U_H the
-sources' undisturbed speed at the obstacle's top, beta its backflow ratio)
+The cavity is kappa H tall (``wind.recirculation_height``, Roeckle's kappa = 1 by
+default). The outer flow goes around the cavity as around a body (a particle that ends a
+step in it is mirrored out across its nearest edge, top or side, never along the wind, so
+its flux passes around) and the cells add to their wind the closed eddy of the stream
+function (xi = s / L_R, h(xi) = kappa H sqrt(1 - xi^2), U_H the sources' undisturbed speed
+at the obstacle's top, beta its backflow ratio, m ``wind.recirculation_exponent``)
 
-    psi = -beta U_H z P(xi) (1 - z^2/h^2)^2,   P = (27/4) xi (1 - xi)^2,
-    u_s = d psi/dz = -beta U_H P (1 - z^2/h^2)(1 - 5 z^2/h^2),   w = -d psi/ds:
+    psi = -beta U_H z P(xi) (1 - (z/h)^m)^2,   P = (27/4) xi (1 - xi)^2,
+    u_s = d psi/dz = -beta U_H P (1 - (z/h)^m)(1 - (2m + 1)(z/h)^m),   w = -d psi/ds:
 
 divergence-free, no net flux through any plane across the wind (psi = 0 on the floor, the
-lee face and the cavity's edge), backflow beta U_H at the floor a third of the way along
-and a forward return flow above z = h / sqrt(5). Separated flows behind fences and steps
-reach backflows of about 0.2-0.3 of the outer speed (Eaton and Johnston 1981, AIAA J. 19,
-1093; Castro and Fackrell 1978, J. Ind. Aerodyn. 3, 1).
+lee face and the cavity's edge), backflow beta U_H at the floor a third of the way along,
+up to z = (2m + 1)^(-1/m) h (m = 2: h / sqrt(5)), and a forward return flow above it.
+Separated flows behind fences and steps reach backflows of about 0.2-0.3 of the outer
+speed (Eaton and Johnston 1981, AIAA J. 19, 1093; Castro and Fackrell 1978, J. Ind.
+Aerodyn. 3, 1). A larger m confines the return flow to the cavity's top, where the shear
+layer is; with kappa, it sets how tall the backflow stands (``lee_by_height.py``).
 
 The shear layer that leaves the obstacle's top mixes the wake: a free shear flow has an
 eddy viscosity of about c U_s delta, c ~ 0.01-0.07 (Pope 2000, Turbulent Flows, §5.4-5.5),
@@ -38,6 +42,8 @@ d beyond it. The walk's drift takes grad K_w, so the well-mixed condition still 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -46,9 +52,19 @@ from windbench.wind.primitives import profile_factor
 
 GROUND_SLACK = 1e-9  # m: a box this close to the domain's floor stands on it
 CLOSED_SIDES = ("slip", "no_slip", "periodic")  # side faces that mirror or repeat a wake
-CX, CY, DX, DY, HALF_DEPTH, N_LO, N_HI, TOP, SPEED, LENGTH, BACKFLOW, MIXING = range(12)
-N_WAKE = 12  # columns of a wake row
+CX, CY, DX, DY, HALF_DEPTH, N_LO, N_HI, TOP, SPEED, LENGTH = range(10)
+BACKFLOW, MIXING, EXPONENT, CAVITY = range(10, 14)
+N_WAKE = 14  # columns of a wake row
 P_PEAK = 27.0 / 4.0  # P(1/3) = 1
+
+
+class Eddy(NamedTuple):
+    """The near wake's settings (module docstring), the same for every box."""
+
+    backflow: float  # beta: backflow at the floor over U_H
+    mixing: float  # c of the shear layer's K_w = c U_H H
+    exponent: float  # m of the eddy's profile (1 - (z/h)^m)^2
+    height: float  # kappa: the cavity's height over the box's
 
 
 def fackrell_length(height: float, depth: float, width: float) -> float:
@@ -98,9 +114,10 @@ def lateral_span(lo, hi, d, scene) -> tuple[float, float, float]:
     return (-np.inf if closed_lo else n_lo), (np.inf if closed_hi else n_hi), width
 
 
-def wake_rows(scene, lower, backflow: float, mixing: float):
+def wake_rows(scene, lower, eddy: Eddy):
     """(n_wakes, N_WAKE) rows of the boxes standing on the floor (module docstring): lee
-    face centre, wind direction, half depth, lateral span, H, U_H, L_R, beta, c."""
+    face centre, wind direction, half depth, lateral span, H, U_H, L_R, beta, c, m and
+    the cavity's height kappa H."""
     d = wind_direction(scene.sources)
     rows = []
     for body in scene.bodies if d is not None else ():
@@ -115,7 +132,7 @@ def wake_rows(scene, lower, backflow: float, mixing: float):
         speed = speed_at(scene.sources, float(hi[2]))
         rows.append(
             (centre[0], centre[1], d[0], d[1], half_depth, n_lo, n_hi, top, speed, length)
-            + (backflow, mixing)
+            + (eddy.backflow, eddy.mixing, eddy.exponent, eddy.height * top)
         )
     return np.array(rows, dtype=np.float64).reshape(len(rows), N_WAKE)
 
@@ -174,7 +191,7 @@ def _in_cavity(row, s, z, n):
     xi = s / row[LENGTH]
     if xi >= 1.0:
         return -1.0, 0.0
-    t = z * z / (row[TOP] * row[TOP] * (1.0 - xi * xi))
+    t = z * z / (row[CAVITY] * row[CAVITY] * (1.0 - xi * xi))
     return (xi, t) if t < 1.0 else (-1.0, 0.0)
 
 
@@ -207,7 +224,7 @@ def leave_cavity(wakes, p, lower_z):
         s, z, n, xi, t = _cavity_point(row, p, lower_z)
         if xi < 0.0:
             continue
-        up = row[TOP] * np.sqrt(1.0 - xi * xi) - z
+        up = row[CAVITY] * np.sqrt(1.0 - xi * xi) - z
         side = min(n - row[N_LO], row[N_HI] - n)
         if up <= side:
             return (p[0], p[1], p[2] + 2.0 * up)
@@ -226,12 +243,14 @@ def eddy_wind(wakes, p, lower_z):
         if xi < 0.0:
             continue
         amp = -row[BACKFLOW] * row[SPEED]
+        m = row[EXPONENT]
+        tm = t ** (0.5 * m)  # (z / h)^m
         shape = P_PEAK * xi * (1.0 - xi) ** 2
         slope = P_PEAK * (1.0 - xi) * (1.0 - 3.0 * xi)  # dP/dxi
-        # d/dxi of psi / (amp z) = P (1 - t)^2, t = z^2 / h(xi)^2, dt/dxi = 2 t xi / (1 - xi^2)
-        growth = P_PEAK * xi * (1.0 - xi) / (1.0 + xi) * 2.0 * t * xi  # P dt/dxi
-        along = amp * shape * (1.0 - t) * (1.0 - 5.0 * t)
-        up = -amp * z * (1.0 - t) * (slope * (1.0 - t) - 2.0 * growth) / row[LENGTH]
+        # d/dxi of psi / (amp z) = P (1 - tm)^2, d tm/dxi = m tm xi / (1 - xi^2)
+        growth = P_PEAK * xi * (1.0 - xi) / (1.0 + xi) * m * tm * xi  # P dtm/dxi
+        along = amp * shape * (1.0 - tm) * (1.0 - (2.0 * m + 1.0) * tm)
+        up = -amp * z * (1.0 - tm) * (slope * (1.0 - tm) - 2.0 * growth) / row[LENGTH]
         u += along * row[DX]
         v += along * row[DY]
         w += up
