@@ -222,7 +222,7 @@ def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
     )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _widened(sx, sy, sz, cone, k):
     """(cos, sin) of phi + theta: the cone of patch k (its row of ``cone``) seen from the
     axis (sx, sy, sz) / |s|, phi the angle between the axes; _WIDE when it reaches 90
@@ -244,7 +244,7 @@ def _widened(sx, sy, sz, cone, k):
     return c, s_phi * cone[k, 3] + c_phi * cone[k, 4]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _union_cos(cone, a, b):
     """cos of the half-angle of one cone around the normals of patches a and b."""
     sx, sy, sz = cone[a, 0] + cone[b, 0], cone[a, 1] + cone[b, 1], cone[a, 2] + cone[b, 2]
@@ -280,7 +280,7 @@ def refit(tree, triangles, p, fit):
         cone[k, 3], cone[k, 4] = (cl, sl) if cl < cr else (cr, sr)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _refit_leaf(order, start, stop, triangles, p, normals, box, cone, k):
     """The box of leaf k's vertices and the cone around the normals of its triangles
     order[start:stop] (scalars: it runs for every leaf in every substep)."""
@@ -312,7 +312,7 @@ def _refit_leaf(order, start, stop, triangles, p, normals, box, cone, k):
     )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _boxes_meet(box_a, a, box_b, b, gap):
     """Whether box row a of ``box_a`` and row b of ``box_b`` (lower and upper corners) come
     within ``gap`` of each other."""
@@ -322,7 +322,7 @@ def _boxes_meet(box_a, a, box_b, b, gap):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _adjacent(order, first, count, triangles, a, b, stamp, clock):
     """Whether patches a and b share a vertex (marks in ``stamp``, clock[0] the last)."""
     clock[0] += 1
@@ -384,7 +384,7 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
     return pairs, found
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _grown(rows):
     """``rows`` (K, w) copied into an array of twice the rows."""
     out = np.empty((2 * rows.shape[0], rows.shape[1]), rows.dtype)
@@ -392,7 +392,7 @@ def _grown(rows):
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _append(rows, n, a, b):
     """(rows, n + 1) with the pair (a, b) written at row n (``rows`` grown when full)."""
     if n == rows.shape[0]:
@@ -401,7 +401,7 @@ def _append(rows, n, a, b):
     return rows, n + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _plane(p, tri):
     """(nx, ny, nz, 2 A): unit normal of triangle ``tri`` at ``p`` and twice its area."""
     a, b, c = tri[0], tri[1], tri[2]
@@ -414,14 +414,14 @@ def _plane(p, tri):
     return nx, ny, nz, area2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _height(p, tri, i, nx, ny, nz):
     """(x_i - x_tri[0]) . n."""
     a = tri[0]
     return (p[i, 0] - p[a, 0]) * nx + (p[i, 1] - p[a, 1]) * ny + (p[i, 2] - p[a, 2]) * nz
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _barycentric(p, tri, i, nx, ny, nz, area2, k):
     """Barycentric coordinate k of the projection of vertex i on the plane of ``tri``:
     beta_k = ((x_b - x_a) x (x_i - x_a)) . n / 2A over the edge a-b opposite corner k."""
@@ -470,7 +470,7 @@ def push_vertex(p, xp, inv_mass, i, tri, thickness, reach):
     return c
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _outside_box(p, tri, i, gap):
     """Whether vertex i lies outside the box of triangle ``tri`` grown by ``gap``."""
     for k in range(3):
@@ -482,7 +482,7 @@ def _outside_box(p, tri, i, gap):
     return False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _segment_parameters(p, i, j, k, l):
     """(s, u, |gap|^2) of the closest points p_i + s (p_j - p_i), p_k + u (p_l - p_k) of two
     edges (clamped to [0, 1]; parallel edges: s = 0), in scalars: it runs for every
@@ -545,12 +545,12 @@ def push_edges(p, xp, inv_mass, i, j, k, l, thickness, reach):
     return c
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _incident(tri, i):
     return tri[0] == i or tri[1] == i or tri[2] == i
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _outside_patch(p, box, k, i, gap):
     """Whether vertex i lies outside the box of patch k grown by ``gap``."""
     for a in range(3):
@@ -559,7 +559,7 @@ def _outside_patch(p, box, k, i, gap):
     return False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _vertex_near_triangle(p, i, tri, reach):
     """Whether vertex i lies within ``reach`` of the plane of ``tri`` and projects inside
     it: the part of :func:`push_vertex`'s test that does not need the start positions."""
@@ -572,7 +572,7 @@ def _vertex_near_triangle(p, i, tri, reach):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _edges_close(p, i, j, k, l, reach):
     """Whether edges i-j and k-l come within ``reach`` at points inside both (the first
     test of :func:`push_edges`)."""
@@ -759,7 +759,7 @@ def segment_crosses(p, i, j, a, b, c):
     return 0.0 <= t <= 1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _share_vertex(a, b):
     for u in range(3):
         for v in range(3):
@@ -779,7 +779,7 @@ def triangles_cross(p, a, b):
     return False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _boxes_apart(p, a, b):
     """Whether the boxes of triangles ``a`` and ``b`` do not meet."""
     for k in range(3):
@@ -790,7 +790,7 @@ def _boxes_apart(p, a, b):
     return False
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _one_side(p, f, g):
     """Whether the corners of triangle ``g`` (a 3-tuple) all lie strictly on one side of
     the plane of triangle ``f``: then the two cannot cross (exact, no tolerance)."""
