@@ -23,6 +23,13 @@ wind along x and the top of the run's highest solid cell (a body fills the cells
 centres it holds, so a 2 m fence is 2.20 m tall at h = 0.73 m, 1.84 m at 0.37 m). Appends to
 ``experiments/results/reference_noise.csv``: one row per pair, with the date and the
 runs' code version.
+
+With ``--by-height`` (and ``--against``) it gives instead, per probe height of the lee
+box, each run's and the reference's mean wind along x (m/s) and that height's part of
+lee_error^2 (the parts sum to it), appended to ``experiments/results/lee_by_height.csv``:
+where in the lee box a lee error comes from.
+
+    PYTHONPATH=$PWD python experiments/reference_noise.py RUNS... --against REF --by-height
 """
 
 from __future__ import annotations
@@ -37,15 +44,21 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from experiments.rows import append_rows
+from experiments.rows import show_and_append
 from windbench.report.collect import read_run
-from windbench.report.lee import beyond_noise, lee_error, sampling_noise
+from windbench.report.lee import beyond_noise, lee_error, lee_error_by_height, sampling_noise
 
 OUT = Path(__file__).resolve().parent / "results" / "reference_noise.csv"
+HEIGHT_OUT = OUT.with_name("lee_by_height.csv")
 COLUMNS = [
     "date", "code", "scene", "fine", "coarse", "coarse_model", "window_flow_throughs", "e", "noise",
     "beyond_noise", "noise_by_blocks", "fine_lee_u", "coarse_lee_u", "fine_body_height", "coarse_body_height",
     "folder",
+]  # fmt: skip
+
+HEIGHT_COLUMNS = [
+    "date", "code", "scene", "resolution", "model", "reference", "lee_error", "z", "u_run",
+    "u_reference", "part_of_error_squared", "folder",
 ]  # fmt: skip
 
 
@@ -144,17 +157,46 @@ def rows(folder: Path, against: Path | None = None) -> list[dict]:
     return [pair_row(fine, coarse, facts, folder) for fine, coarse in pairs]
 
 
+def height_rows(folder: Path, against: Path) -> list[dict]:
+    """``--by-height``: per probe height, every complete run in ``folder`` against the
+    finest run in ``against`` (:func:`windbench.report.lee.lee_error_by_height`)."""
+    ref = max(complete_runs(against), key=lambda r: int(r.settings["resolution"]))
+    found = []
+    for run in complete_runs(folder):
+        common = {
+            "date": datetime.now(UTC).date().isoformat(),
+            "code": run.code,
+            "scene": run.settings["scene"],
+            "resolution": run.settings["resolution"],
+            "model": wind_model(run),
+            "reference": ref.settings["resolution"],
+            "lee_error": round(lee_error(run, ref), 4),
+            "folder": folder.name,
+        }
+        for z, u_run, u_ref, part in lee_error_by_height(run, ref):
+            found.append(
+                common
+                | {"z": round(z, 3), "u_run": round(u_run, 3), "u_reference": round(u_ref, 3)}
+                | {"part_of_error_squared": round(part, 5)}
+            )
+    return found
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("sweeps", nargs="+", type=Path)
     parser.add_argument("--against", type=Path, help="a reference sweep: each run against it")
-    parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--by-height", action="store_true", help="lee error by probe height")
+    parser.add_argument("--out", type=Path, default=None, help="default: by the form")
     args = parser.parse_args(argv)
+    if args.by_height:
+        if args.against is None:
+            parser.error("--by-height needs --against REFERENCE")
+        found = [row for folder in args.sweeps for row in height_rows(folder, args.against)]
+        show_and_append(args.out or HEIGHT_OUT, found, HEIGHT_COLUMNS, HEIGHT_COLUMNS[3:-1])
+        return
     found = [row for folder in args.sweeps for row in rows(folder, args.against)]
-    for row in found:
-        print(", ".join(f"{k} {row[k]}" for k in COLUMNS[2:-1]))
-    append_rows(args.out, found, COLUMNS)
-    print(f"appended {len(found)} rows to {args.out}")
+    show_and_append(args.out or OUT, found, COLUMNS, COLUMNS[2:-1])
 
 
 if __name__ == "__main__":

@@ -16,3 +16,11 @@ def append_rows(path: Path, rows: Sequence[dict], fields: Sequence[str]) -> None
         if new:
             writer.writeheader()
         writer.writerows(rows)
+
+
+def show_and_append(path: Path, rows: Sequence[dict], fields: Sequence[str], shown) -> None:
+    """Print each row's ``shown`` fields on one line, then :func:`append_rows`."""
+    for row in rows:
+        print(", ".join(f"{k} {row[k]}" for k in shown))
+    append_rows(path, rows, fields)
+    print(f"appended {len(rows)} rows to {path}")
