@@ -27,8 +27,7 @@ up to z = (2m + 1)^(-1/m) h (m = 2: h / sqrt(5)), and a forward return flow abov
 Separated flows behind fences and steps reach backflows of about 0.2-0.3 of the outer
 speed (Eaton and Johnston 1981, AIAA J. 19, 1093; Castro and Fackrell 1978, J. Ind.
 Aerodyn. 3, 1). A larger m confines the return flow to the cavity's top, where the shear
-layer is; with kappa, it sets how tall the backflow stands
-(``experiments/reference_noise.py --by-height``).
+layer is; with kappa, it sets how tall the backflow stands.
 
 The shear layer that leaves the obstacle's top mixes the wake: a free shear flow has an
 eddy viscosity of about c U_s delta, c ~ 0.01-0.07 (Pope 2000, Turbulent Flows, §5.4-5.5),
