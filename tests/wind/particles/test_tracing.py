@@ -112,7 +112,8 @@ def test_first_hit_matches_the_slab_test_for_a_box(a, b):
             if not lo[k] <= a[k] <= hi[k]:
                 t0, t1 = 1.0, 0.0
             continue
-        u, v = sorted(((lo[k] - a[k]) / e[k], (hi[k] - a[k]) / e[k]))
+        with np.errstate(over="ignore"):  # a subnormal e[k]: the slab's t is +-inf, as it should be
+            u, v = sorted(((lo[k] - a[k]) / e[k], (hi[k] - a[k]) / e[k]))
         t0, t1 = max(t0, u), min(t1, v)
     s, _ = hit(BOX, [*lo, *hi, 0.0], a, b)
     if t0 <= t1 and (t1 - t0) * np.linalg.norm(e) > 1e-9:
