@@ -124,7 +124,7 @@ class RunRecord:
     lee_points: np.ndarray | None = None  # (n, 3) lee probe points
     lee_wind: np.ndarray | None = None  # (n, 3) wind there: window mean (:func:`_probes`)
     lee_block_wind: np.ndarray | None = None  # (blocks, n, 3) its means over window blocks
-    free_stream_speed: float = math.nan  # mean |u| at the free-stream probes, last snapshot
+    free_stream_speed: float = math.nan  # mean |u| at the free-stream probes (as lee_wind)
     reference_speed: float = math.nan
     experiment: str = ""
     wake: pd.DataFrame | None = None  # window-mean u/u0: index distance (H), columns height (H)
