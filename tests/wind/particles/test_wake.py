@@ -31,6 +31,7 @@ from windbench.wind.particles.wake import (
 )
 
 BACKFLOW, MIXING = 0.3, 0.05
+EDDY = Eddy(BACKFLOW, MIXING, 2.0, 1.0)  # the defaults of the wake's shape
 WALL = {"type": "box", "min": [2.0, 0.0, 0.0], "max": [2.5, 2.0, 1.5]}  # across the channel
 
 
@@ -48,14 +49,12 @@ def test_fackrell_length_at_its_published_limits():
 
 def test_boxes_spanning_or_touching_closed_sides_have_wide_wakes():
     fence = build_scene(compose_config(["scene=fence"]).scene)
-    (row,) = wake_rows(fence, np.zeros(3), Eddy(BACKFLOW, MIXING, 2.0, 1.0))
+    (row,) = wake_rows(fence, np.zeros(3), EDDY)
     assert row[N_LO] == -np.inf and row[N_HI] == np.inf  # periodic span: a 2-D fence
     assert row[LENGTH] == pytest.approx(fackrell_length(2.0, 1.0, np.inf))
     assert row[SPEED] == pytest.approx(6.0 * np.log(2.0 / 0.1) / np.log(10.0 / 0.1))
     walled = build_scene(compose_config(["scene=two_flags_wall"]).scene)
-    (row,) = wake_rows(
-        walled, np.zeros(3), Eddy(BACKFLOW, MIXING, 2.0, 1.0)
-    )  # the poles are not resolved
+    (row,) = wake_rows(walled, np.zeros(3), EDDY)  # the poles are not resolved
     assert (row[N_LO], row[N_HI]) == (2.0, np.inf)  # its side at y = 4 is a slip wall
     assert row[LENGTH] == pytest.approx(fackrell_length(3.0, 1.0, 4.0))  # W mirrored
     assert row[SPEED] == 6.0
@@ -111,8 +110,9 @@ def test_the_backflow_peaks_at_the_floor_a_third_along_the_cavity():
     assert eddy_wind(calm, (s, 1.0, 0.2), 0.0) == (0.0, 0.0, 0.0)
 
 
-def test_the_cavity_edge_reflects_particles_across_it_without_moving_them_downwind():
-    _, rows = wall_rows()
+@pytest.mark.parametrize("height", [1.0, 1.3])
+def test_the_cavity_edge_reflects_particles_across_it_without_moving_them_downwind(height):
+    _, rows = wall_rows(height=height)
     (row,) = rows
     rng = np.random.default_rng(2)
     pts = np.column_stack(
