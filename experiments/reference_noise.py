@@ -109,6 +109,11 @@ def complete_runs(folder: Path) -> list:
     return [r for r in records if r.status == "complete"]
 
 
+def finest_run(folder: Path):
+    """The complete run of the highest resolution in ``folder`` (the reference)."""
+    return max(complete_runs(folder), key=lambda r: int(r.settings["resolution"]))
+
+
 def wind_model(rec) -> str:
     """The run's wind model: backend and its lee model or advection scheme."""
     c = rec.config
@@ -151,7 +156,7 @@ def rows(folder: Path, against: Path | None = None) -> list[dict]:
         records.sort(key=lambda r: -int(r.settings["resolution"]))
         pairs = list(itertools.combinations(records, 2))
     else:
-        ref = max(complete_runs(against), key=lambda r: int(r.settings["resolution"]))
+        ref = finest_run(against)
         pairs = [(ref, r) for r in records]
     facts = {r.path: run_facts(r.path) for pair in pairs for r in pair}
     return [pair_row(fine, coarse, facts, folder) for fine, coarse in pairs]
@@ -160,7 +165,7 @@ def rows(folder: Path, against: Path | None = None) -> list[dict]:
 def height_rows(folder: Path, against: Path) -> list[dict]:
     """``--by-height``: per probe height, every complete run in ``folder`` against the
     finest run in ``against`` (:func:`windbench.report.lee.lee_error_by_height`)."""
-    ref = max(complete_runs(against), key=lambda r: int(r.settings["resolution"]))
+    ref = finest_run(against)
     found = []
     for run in complete_runs(folder):
         common = {
