@@ -48,6 +48,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from windbench.arrays import copy_rows
+
 LEAF = 4  # triangles per leaf patch at most
 REACH = 4.0  # a vertex this many thicknesses behind a triangle is brought back
 PASS_SWEEPS = 2  # passes of the self-contacts at most, while the last pushed a pair
@@ -388,7 +390,7 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
 def _grown(rows):
     """``rows`` (K, w) copied into an array of twice the rows."""
     out = np.empty((2 * rows.shape[0], rows.shape[1]), rows.dtype)
-    out[: rows.shape[0]] = rows
+    copy_rows(out, rows, rows.shape[0])
     return out
 
 
@@ -733,7 +735,7 @@ def self_contact_substep(sc, inv_mass, p, xp, fit, last):
             reach = pass_reach(largest_move(p, fit.anchor), sc.thickness)
             if self_contacts(sc, inv_mass, p, fit.anchor, fit, reach) == 0:
                 break
-        fit.anchor[:] = p
+        copy_rows(fit.anchor, p, p.shape[0])
 
 
 @njit(cache=True)

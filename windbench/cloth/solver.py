@@ -50,6 +50,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from windbench.arrays import copy_rows
 from windbench.cloth.collision import (
     body_boxes,
     contact_vertex,
@@ -200,7 +201,7 @@ def _frame_start(fit, x):
     """The self-contacts' sides at the frame's start ``x`` and their pass count reset (an
     argument: numba leaves the branch out for ``fit`` None)."""
     if fit is not None:
-        fit.anchor[:] = x
+        copy_rows(fit.anchor, x, x.shape[0])
         fit.passes[0] = 0
 
 
@@ -314,8 +315,8 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     inv_h = 1.0 / h
     p, vv = out
     xp, lam, chain_work, _, clear, _, fit = work
-    xp[:] = x
-    vv[:] = v
+    copy_rows(xp, x, x.shape[0])
+    copy_rows(vv, v, v.shape[0])
     normal = np.empty(3)
     _frame_start(fit, x)
     moving = np.any(model.contacts.bodies.params[:, MOVING] != 0.0)

@@ -75,15 +75,16 @@ def cells_beside(I, J, K, a):
     return I - 1, J - 1, K - 1, I - 1 - int(a == 0), J - 1 - int(a == 1), K - 1 - int(a == 2)
 
 
-@njit(cache=True, inline="always")
-def _axis_first(q, b):
-    """q viewed with axis b first, the other two in increasing order (a face plane's
-    transverse lattice): plane L of the view is the padded layer L along b."""
+@njit(cache=True)
+def _layer(q, b, L):
+    """The padded layer L of q along axis b: a plane over the other two axes in increasing
+    order (a face plane's transverse lattice). Basic indexing: ``q.transpose(axes)``
+    would compile numba's formatted-error path (:mod:`windbench.arrays`)."""
     if b == 0:
-        return q.transpose((0, 1, 2))
+        return q[L, :, :]
     if b == 1:
-        return q.transpose((1, 0, 2))
-    return q.transpose((2, 0, 1))
+        return q[:, L, :]
+    return q[:, :, L]
 
 
 @njit(cache=True)
@@ -97,12 +98,12 @@ def _copy_plane(dst, src):
 
 
 @njit(cache=True)
-def _mirror(qb, ghost, inner, wall):
-    """qb[ghost] = 2 wall - qb[inner] (planes of an axis-first view): the wall value
-    halfway between the ghost and the inner cell."""
-    for c1 in range(qb.shape[1]):
-        for c2 in range(qb.shape[2]):
-            qb[ghost, c1, c2] = 2.0 * wall[c1, c2] - qb[inner, c1, c2]
+def _mirror(ghost, inner, wall):
+    """ghost = 2 wall - inner (planes of one axis, :func:`_layer`): the wall value halfway
+    between the ghost and the inner cell."""
+    for c1 in range(ghost.shape[0]):
+        for c2 in range(ghost.shape[1]):
+            ghost[c1, c2] = 2.0 * wall[c1, c2] - inner[c1, c2]
 
 
 @njit(cache=True)
@@ -139,36 +140,35 @@ def fill_boundary(q, a, kinds, planes, set_normal):
     """
     P = q.shape
     for b in range(3):
-        qb = _axis_first(q, b)
         n_b = P[b] - 2 - (1 if b == a else 0)  # cells along b
         lo_kind = kinds[2 * b]
         hi_kind = kinds[2 * b + 1]
         if b == a:  # the normal component: boundary faces 1 and n_b + 1, ghosts beyond
             lo_face, hi_face = 1, n_b + 1
             if lo_kind == PERIODIC:
-                _copy_plane(qb[hi_face], qb[lo_face])
-                _copy_plane(qb[0], qb[hi_face - 1])
-                _copy_plane(qb[hi_face + 1], qb[lo_face + 1])
+                _copy_plane(_layer(q, b, hi_face), _layer(q, b, lo_face))
+                _copy_plane(_layer(q, b, 0), _layer(q, b, hi_face - 1))
+                _copy_plane(_layer(q, b, hi_face + 1), _layer(q, b, lo_face + 1))
                 continue
             for side in range(2):
                 kind = lo_kind if side == 0 else hi_kind
                 face = lo_face if side == 0 else hi_face
                 if set_normal and kind != OUTFLOW:
-                    _copy_plane(qb[face], planes[2 * b + side])
-                _copy_plane(qb[0 if side == 0 else hi_face + 1], qb[face])
+                    _copy_plane(_layer(q, b, face), planes[2 * b + side])
+                _copy_plane(_layer(q, b, 0 if side == 0 else hi_face + 1), _layer(q, b, face))
         else:  # a tangential component: ghost cells h/2 beyond the face
             if lo_kind == PERIODIC:
-                _copy_plane(qb[0], qb[n_b])
-                _copy_plane(qb[n_b + 1], qb[1])
+                _copy_plane(_layer(q, b, 0), _layer(q, b, n_b))
+                _copy_plane(_layer(q, b, n_b + 1), _layer(q, b, 1))
                 continue
             for side in range(2):
                 kind = lo_kind if side == 0 else hi_kind
-                inner = 1 if side == 0 else n_b
-                ghost = 0 if side == 0 else n_b + 1
+                ghost = _layer(q, b, 0 if side == 0 else n_b + 1)
+                inner = _layer(q, b, 1 if side == 0 else n_b)
                 if kind == SLIP or kind == OUTFLOW:
-                    _copy_plane(qb[ghost], qb[inner])
+                    _copy_plane(ghost, inner)
                 else:  # inflow, opening, no_slip: the wall value at the face
-                    _mirror(qb, ghost, inner, planes[2 * b + side])
+                    _mirror(ghost, inner, planes[2 * b + side])
 
 
 def boundary_planes(kinds, wall_values, inflow_fn, lower, upper, h, shape):

@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from windbench.arrays import cross
 from windbench.geometry.raster import segment_triangle
 from windbench.wind.navier_stokes.advection import at_face
 from windbench.wind.navier_stokes.boundaries import cells_beside
@@ -59,7 +60,7 @@ def cell_normals(positions, velocities, triangles, start, items, index, normals,
             a = positions[triangles[t, 0]]
             b = positions[triangles[t, 1]]
             cc = positions[triangles[t, 2]]
-            n = np.cross(b - a, cc - a)
+            n = cross(b - a, cc - a)
             area = 0.5 * np.sqrt((n * n).sum())
             nsum += n
             vt = (
@@ -70,14 +71,9 @@ def cell_normals(positions, velocities, triangles, start, items, index, normals,
             vsum += area * vt
             asum += area
         norm = np.sqrt((nsum * nsum).sum())
-        if norm > 0.0:
-            normals[m] = nsum / norm
-        else:
-            normals[m] = 0.0
-        if asum > 0.0:
-            velocity[m] = vsum / asum
-        else:
-            velocity[m] = 0.0
+        for k in range(3):
+            normals[m, k] = nsum[k] / norm if norm > 0.0 else 0.0
+            velocity[m, k] = vsum[k] / asum if asum > 0.0 else 0.0
 
 
 @njit(cache=True)
@@ -178,7 +174,7 @@ def blocked_faces(positions, velocities, mobility, triangles, start, items, lowe
                 ta = positions[triangles[hit, 0]]
                 tb = positions[triangles[hit, 1]]
                 tc = positions[triangles[hit, 2]]
-                n = np.cross(tb - ta, tc - ta)
+                n = cross(tb - ta, tc - ta)
                 n /= np.sqrt((n * n).sum())
                 vt = (
                     velocities[triangles[hit, 0]]
@@ -321,7 +317,7 @@ def triangle_pressure_loads(positions, triangles, psi, solid, lower, h, scale):
         a = positions[triangles[t, 0]]
         b = positions[triangles[t, 1]]
         c = positions[triangles[t, 2]]
-        n = np.cross(b - a, c - a)  # |n| = 2 A
+        n = cross(b - a, c - a)  # |n| = 2 A
         if (n * n).sum() == 0.0:
             continue
         axis = int(np.argmax(np.abs(n)))

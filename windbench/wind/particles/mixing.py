@@ -41,6 +41,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from windbench.arrays import copy_head
 from windbench.errors import ConfigError
 from windbench.geometry.bodies import BOX
 from windbench.wind.particles.emission import emission_specs
@@ -363,7 +364,7 @@ def nearest_hit(bodies, cloth, obstacles, cell, p, e, t0, t1, work):
             )
             if 0.0 <= sh < best:
                 best, body = sh, items[m]
-                work.normal[:] = work.body_normal
+                copy_head(work.normal, work.body_normal, 3)
     if obstacles & TRIANGLES:
         best, on_body = first_triangle_hit(cloth, cell, a, b, e, best, BODY_HIT, work.normal)
         body = body if on_body else -1

@@ -45,6 +45,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from windbench.arrays import copy_head, cross
 from windbench.geometry.bodies import (
     MESH,
     POSE,
@@ -377,7 +378,7 @@ def _push(touched, n_touched, cell):
     """Append cell to the touched list (doubling it when full)."""
     if n_touched == touched.shape[0]:
         grown = np.empty(2 * touched.shape[0] + 16, dtype=np.int64)
-        grown[:n_touched] = touched[:n_touched]
+        copy_head(grown, touched, n_touched)
         touched = grown
     touched[n_touched] = cell
     return touched
@@ -528,11 +529,11 @@ def first_triangle_hit(cloth, cell, a, b, e, best, body_hit, normal):
         if 0.0 <= sh < best:
             best = sh
             body_hit = False
-            tri_n = np.cross(vb - va, vc - va)
+            tri_n = cross(vb - va, vc - va)
             tri_n /= np.sqrt((tri_n * tri_n).sum())
             if tri_n[0] * e[0] + tri_n[1] * e[1] + tri_n[2] * e[2] > 0.0:
                 tri_n = -tri_n
-            normal[:] = tri_n
+            copy_head(normal, tri_n, 3)
     return best, body_hit
 
 
@@ -540,7 +541,8 @@ def first_triangle_hit(cloth, cell, a, b, e, best, body_hit, normal):
 def _record_hit(mark_mode, body_hit, normal, normals, n_marks):
     """Keep the hit's normal when ``mark_mode`` makes the later marks deflected; the count."""
     if mark_mode == MARK_ALL or (mark_mode == MARK_BODIES and body_hit):
-        normals[n_marks] = normal
+        for k in range(3):
+            normals[n_marks, k] = normal[k]
         n_marks += 1
     return n_marks
 
@@ -610,7 +612,7 @@ def _piece_hit(bodies, cloth, flags, cell, p, e, span, work):
             if 0.0 <= sh < best:
                 best = sh
                 body_hit = True
-                hit_n[:] = tmp_n
+                copy_head(hit_n, tmp_n, 3)
     if obstacles & TRIANGLES:
         best, body_hit = first_triangle_hit(cloth, cell, a, b, e, best, body_hit, hit_n)
     return best, body_hit
