@@ -349,7 +349,7 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
     order, first, count, left, right = tree.order, tree.first, tree.count, tree.left, tree.right
     connected = tree.connected
     pairs = np.empty((64, 2), np.int64)
-    found = 0
+    found = np.int64(0)  # not the literal 0: :func:`_append` would be compiled for it too
     top = 1
     stack[0, 0] = stack[0, 1] = 0
     while top > 0:

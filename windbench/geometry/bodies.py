@@ -58,6 +58,7 @@ MOVING = N_PARAMS  # params column: 1 for a moving body, 0 for a still one
 POSE = MOVING + 1  # params columns of the current pose row ...
 PREVIOUS = POSE + POSE_WIDTH  # ... and of the previous one
 ROW = PREVIOUS + POSE_WIDTH
+FIRST = np.int64(0)  # body 0 as an int64 value: a literal 0 compiles the distances again
 MESH_SPACING = 0.01  # m: the SDF lattice of a mesh body; error ~ h^2 / (4 r) on radius r
 _KEYS = {
     "box": ("min", "max"),
@@ -421,7 +422,7 @@ def union_distance_point(table, px, py, pz, normal):
     """Signed distance to the nearest body of a :class:`BodyTable`, normal of that one."""
     normal[0], normal[1], normal[2] = 0.0, 0.0, 1.0
     if table.kinds.shape[0] == 1:  # one body: no scratch to allocate (a contact's hot path)
-        return table_distance(table, 0, px, py, pz, normal)
+        return table_distance(table, FIRST, px, py, pz, normal)
     best = np.inf
     tmp = np.empty(3)
     for b in range(table.kinds.shape[0]):

@@ -94,7 +94,7 @@ def _overlap_keys(positions, triangles, lower, h, shape):
                         continue
                     if n == keys.shape[0]:
                         grown = np.empty(2 * n, dtype=np.int64)
-                        copy_head(grown, keys, n)
+                        copy_head(grown, keys, keys.shape[0])
                         keys = grown
                     keys[n] = ((i * ny + j) * nz + k) * m + t
                     n += 1

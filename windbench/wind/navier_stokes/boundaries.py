@@ -39,6 +39,9 @@ KIND_CODES = {
     "periodic": PERIODIC,
 }
 FACE_NAMES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
+# the padded low ghost layer and the first inner one, as int64 values: a literal index
+# would compile :func:`_layer` once per value
+GHOST, INNER = np.int64(0), np.int64(1)
 
 
 def padded_shape(shape, a: int) -> tuple[int, int, int]:
@@ -144,10 +147,10 @@ def fill_boundary(q, a, kinds, planes, set_normal):
         lo_kind = kinds[2 * b]
         hi_kind = kinds[2 * b + 1]
         if b == a:  # the normal component: boundary faces 1 and n_b + 1, ghosts beyond
-            lo_face, hi_face = 1, n_b + 1
+            lo_face, hi_face = INNER, n_b + 1
             if lo_kind == PERIODIC:
                 _copy_plane(_layer(q, b, hi_face), _layer(q, b, lo_face))
-                _copy_plane(_layer(q, b, 0), _layer(q, b, hi_face - 1))
+                _copy_plane(_layer(q, b, GHOST), _layer(q, b, hi_face - 1))
                 _copy_plane(_layer(q, b, hi_face + 1), _layer(q, b, lo_face + 1))
                 continue
             for side in range(2):
@@ -158,8 +161,8 @@ def fill_boundary(q, a, kinds, planes, set_normal):
                 _copy_plane(_layer(q, b, 0 if side == 0 else hi_face + 1), _layer(q, b, face))
         else:  # a tangential component: ghost cells h/2 beyond the face
             if lo_kind == PERIODIC:
-                _copy_plane(_layer(q, b, 0), _layer(q, b, n_b))
-                _copy_plane(_layer(q, b, n_b + 1), _layer(q, b, 1))
+                _copy_plane(_layer(q, b, GHOST), _layer(q, b, n_b))
+                _copy_plane(_layer(q, b, n_b + 1), _layer(q, b, INNER))
                 continue
             for side in range(2):
                 kind = lo_kind if side == 0 else hi_kind

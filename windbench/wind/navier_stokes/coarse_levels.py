@@ -29,6 +29,8 @@ from numba import njit
 
 PRE, POST, COARSEST = 0, 1, 2  # schedule operations (on one level each)
 FACES = 6  # -x, +x, -y, +y, -z, +z
+# :func:`_smooth`'s order as numpy bools: a literal True or False would compile it twice
+RED_FIRST, BLACK_FIRST = np.bool_(False), np.bool_(True)
 
 
 @njit(cache=True, inline="always")
@@ -101,17 +103,17 @@ def run_cycle(ops, x, b, tables, sweeps, omega):
     for n in range(ops.shape[0]):
         op, lev = ops[n, 0], ops[n, 1]
         if op == PRE:
-            _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[0], False, omega)
+            _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[0], RED_FIRST, omega)
             residual_restrict(
                 x, b, nb, w, diag, parent, blocks[lev, 0], blocks[lev, 1],
                 blocks[lev + 1, 0], blocks[lev + 1, 1], mean[lev],
             )  # fmt: skip
         elif op == POST:
             prolong(x, parent, blocks[lev, 0], blocks[lev, 1])
-            _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[0], True, omega)
+            _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[0], BLACK_FIRST, omega)
         else:
-            _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[1], False, omega)
-            _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[1], True, omega)
+            _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[1], RED_FIRST, omega)
+            _smooth(x, b, nb, w, inv, order, ranges, lev, sweeps[1], BLACK_FIRST, omega)
 
 
 class CellTables(NamedTuple):

@@ -364,7 +364,7 @@ def nearest_hit(bodies, cloth, obstacles, cell, p, e, t0, t1, work):
             )
             if 0.0 <= sh < best:
                 best, body = sh, items[m]
-                copy_head(work.normal, work.body_normal, 3)
+                copy_head(work.normal, work.body_normal, work.body_normal.shape[0])
     if obstacles & TRIANGLES:
         best, on_body = first_triangle_hit(cloth, cell, a, b, e, best, BODY_HIT, work.normal)
         body = body if on_body else -1

@@ -378,7 +378,7 @@ def _push(touched, n_touched, cell):
     """Append cell to the touched list (doubling it when full)."""
     if n_touched == touched.shape[0]:
         grown = np.empty(2 * touched.shape[0] + 16, dtype=np.int64)
-        copy_head(grown, touched, n_touched)
+        copy_head(grown, touched, touched.shape[0])
         touched = grown
     touched[n_touched] = cell
     return touched
@@ -533,7 +533,7 @@ def first_triangle_hit(cloth, cell, a, b, e, best, body_hit, normal):
             tri_n /= np.sqrt((tri_n * tri_n).sum())
             if tri_n[0] * e[0] + tri_n[1] * e[1] + tri_n[2] * e[2] > 0.0:
                 tri_n = -tri_n
-            copy_head(normal, tri_n, 3)
+            copy_head(normal, tri_n, tri_n.shape[0])
     return best, body_hit
 
 
@@ -612,7 +612,7 @@ def _piece_hit(bodies, cloth, flags, cell, p, e, span, work):
             if 0.0 <= sh < best:
                 best = sh
                 body_hit = True
-                copy_head(hit_n, tmp_n, 3)
+                copy_head(hit_n, tmp_n, tmp_n.shape[0])
     if obstacles & TRIANGLES:
         best, body_hit = first_triangle_hit(cloth, cell, a, b, e, best, body_hit, hit_n)
     return best, body_hit
