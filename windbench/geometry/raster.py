@@ -105,7 +105,7 @@ def triangle_cell_pairs(positions, triangles, lower, h, shape) -> np.ndarray:
     """Sorted keys ``cell * m + t`` of every overlap of a cell and triangle t (m triangles):
     the cells in order, each cell's triangles in order. Sorted by numpy: in a compiled
     kernel ``np.sort`` compiles numba's quicksort, about 1.7 CPU seconds in every fresh
-    process."""
+    process (``experiments/compile_first_use.py``)."""
     return np.sort(_overlap_keys(positions, triangles, lower, h, shape))
 
 
