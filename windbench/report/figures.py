@@ -99,7 +99,7 @@ def _color(wind: str) -> str:
 def save(fig: Figure, folder: Path, name: str) -> list[Path]:
     """Write ``fig`` as PNG and SVG. The figures lay themselves out (constrained layout,
     :func:`_figure`), so they are saved at their own size: a tight bounding box would draw
-    each one once more to measure it (a tenth of a smoke report's time)."""
+    each one once more to measure it."""
     import matplotlib
 
     folder.mkdir(parents=True, exist_ok=True)

@@ -168,30 +168,39 @@ def _matched(run: RunRecord, ref: RunRecord):
     return mine, theirs, u_free
 
 
-def lee_error(run: RunRecord, ref: RunRecord) -> float:
-    """RMS over common lee probe points of |u_run - u_ref|, divided by the reference speed."""
+def _squared_differences(run: RunRecord, ref: RunRecord):
+    """(run's indices, reference's indices, U_ref, |u_run - u_ref|^2 per common lee probe
+    point) of :func:`_matched`, or None."""
     matched = _matched(run, ref)
     if matched is None:
-        return math.nan
+        return None
     mine, theirs, u_free = matched
     diff = run.lee_wind[mine] - ref.lee_wind[theirs]
-    return float(np.sqrt(np.mean(np.sum(diff * diff, axis=1))) / u_free)
+    return mine, theirs, u_free, np.sum(diff * diff, axis=1)
+
+
+def lee_error(run: RunRecord, ref: RunRecord) -> float:
+    """RMS over common lee probe points of |u_run - u_ref|, divided by the reference speed."""
+    found = _squared_differences(run, ref)
+    if found is None:
+        return math.nan
+    _, _, u_free, squared = found
+    return float(np.sqrt(np.mean(squared)) / u_free)
 
 
 def lee_error_by_height(run: RunRecord, ref: RunRecord) -> list[tuple[float, ...]]:
     """Where in the lee box a lee error comes from: per probe height z (m) of the common
     lee points, (z, the run's mean wind along x there, the reference's (m/s), that
     height's part of lee_error^2). The parts sum to ``lee_error(run, ref)**2``."""
-    matched = _matched(run, ref)
-    if matched is None:
+    found = _squared_differences(run, ref)
+    if found is None:
         return []
-    mine, theirs, u_free = matched
-    u_run, u_ref = run.lee_wind[mine], ref.lee_wind[theirs]
-    diff = u_run - u_ref
-    part = np.sum(diff * diff, axis=1) / (u_free * u_free * len(mine))
+    mine, theirs, u_free, squared = found
+    u_run, u_ref = run.lee_wind[mine, 0], ref.lee_wind[theirs, 0]
+    part = squared / (u_free * u_free * len(mine))
     z = np.round(ref.lee_points[theirs, 2], POINT_DECIMALS)
     return [
-        (float(h), float(u_run[z == h, 0].mean()), float(u_ref[z == h, 0].mean()))
+        (float(h), float(u_run[z == h].mean()), float(u_ref[z == h].mean()))
         + (float(part[z == h].sum()),)
         for h in np.unique(z)
     ]
