@@ -99,7 +99,9 @@ def _color(wind: str) -> str:
 def save(fig: Figure, folder: Path, name: str) -> list[Path]:
     """Write ``fig`` as PNG and SVG. The figures lay themselves out (constrained layout,
     :func:`_figure`), so they are saved at their own size: a tight bounding box would draw
-    each one once more to measure it."""
+    each one once more to measure it. The layout is solved while the PNG is drawn and then
+    kept (the layout engine is removed), so the SVG, the same figure at the same size,
+    does not solve it again."""
     import matplotlib
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -108,6 +110,7 @@ def save(fig: Figure, folder: Path, name: str) -> list[Path]:
         for ext in ("png", "svg"):
             path = folder / f"{name}.{ext}"
             fig.savefig(path, dpi=110, metadata=_metadata(ext))
+            fig.set_layout_engine("none")  # the axes keep the positions just solved
             out.append(path)
     return out
 
