@@ -253,6 +253,12 @@ class RuntimeConfig:
         "1",
         "numba threads of the run; auto: the cores available / the launcher's parallel runs",
     )
+    compile_ahead: bool = setting(
+        True,
+        "",
+        "on an empty numba cache, compile the cloth's kernels in a second process while the "
+        "run compiles its wind's, when a core is spare (windbench.compile_ahead)",
+    )
 
 
 @dataclass

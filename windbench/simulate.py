@@ -22,7 +22,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm.auto import tqdm
 
-from windbench import metrics, runtime
+from windbench import compile_ahead, metrics, runtime
 from windbench.aero import AeroParams, aerodynamic_forces, pressure_forces
 from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
@@ -584,9 +584,10 @@ class Simulation:
         if not np.isfinite(self.state.positions).all():
             raise SimulationDiverged(n + 1, "cloth positions are not finite (NaN or inf)")
 
-    def run(self, progress: bool = True) -> Recorder:
+    def run(self, progress: bool = True, first_step_done=None) -> Recorder:
         """All steps, spin-up included; ``progress``: a bar on a terminal, else a log
-        line every tenth of the run (:class:`windbench.runtime.ProgressLog`)."""
+        line every tenth of the run (:class:`windbench.runtime.ProgressLog`);
+        ``first_step_done()``, if given, is called once after the first step."""
         total = self.setup.spinup_steps + self.setup.n_steps
         label = f"{self.setup.scene.name}/{self.wind.name}"
         terminal = sys.stderr.isatty()
@@ -597,6 +598,8 @@ class Simulation:
         lines = runtime.ProgressLog(label, total) if progress and not terminal else None
         for n in bar:
             self.step(n)
+            if n == 0 and first_step_done is not None:  # every kernel compiled or loaded
+                first_step_done()
             if lines is not None:
                 lines.update(n + 1)
         return self.recorder
@@ -619,13 +622,22 @@ def run(cfg: DictConfig, out_dir: Path, jobs: int = 1) -> RunResult:
     the reason.
     """
     runtime.use_threads(runtime.thread_count(cfg.runtime.threads, jobs))  # before any kernel
+    with compile_ahead.cloth_kernels(cfg, jobs) as helper:
+        return _run(cfg, out_dir, helper)
+
+
+def _run(cfg: DictConfig, out_dir: Path, helper) -> RunResult:
+    """:func:`run` once its threads are set and the compile ``helper`` (or None) started,
+    which is stopped once the first step is done: the run's kernels are all there then."""
     setup = prepare(cfg)
     path = Path(out_dir) / cfg.output.filename
     git_commit()  # the code as loaded now, before the loop (cached)
     recorder = Recorder(setup)
     recorder.load_average["start"] = runtime.load_average()
     try:
-        Simulation(setup, recorder).run(progress=bool(cfg.sim.progress))
+        Simulation(setup, recorder).run(
+            progress=bool(cfg.sim.progress), first_step_done=lambda: compile_ahead.stop(helper)
+        )
     except Exception as err:  # noqa: BLE001 - recorded, then reported by the caller
         reason = str(err) if isinstance(err, SimulationDiverged) else f"{type(err).__name__}: {err}"
         log.error("run failed: %s", reason)

@@ -53,6 +53,9 @@ class WindField(ABC):
 
     name: ClassVar[str] = ""
     max_cfl: ClassVar[float] = float("inf")  # above it the run warns (see simulate.prepare)
+    # numba kernels of its own, many: on an empty cache a second process compiles the
+    # cloth's while the run compiles these (windbench.compile_ahead)
+    compiles_kernels: ClassVar[bool] = False
     stats_units: ClassVar[dict[str, tuple[str, str]]] = {}  # stats() key -> (long_name, units)
 
     @classmethod

@@ -165,6 +165,7 @@ class NavierStokesWind(WindField):
     # Semi-Lagrangian advection is stable at any CFL, but a backtrace longer than a few
     # cells jumps over thin walls and smears the flow: warn above 5 (Foster & Fedkiw 2001).
     max_cfl = 5.0
+    compiles_kernels = True
     stats_units = {
         "pressure_iterations": (
             "iterations of the pressure solve (multigrid-preconditioned CG)",

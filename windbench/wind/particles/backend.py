@@ -430,6 +430,7 @@ def advance(model, state, work, dt: float, obstacles: Obstacles):
 class ParticleWind(WindField):
     """Gust particles per source; u = sum of the reached sources' w_i (module docstring)."""
 
+    compiles_kernels = True
     stats_units = {
         "live_particles": ("particles alive after the step", "1"),
         "emitted_particles": ("particles emitted in the step", "1"),
