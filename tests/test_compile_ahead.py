@@ -59,11 +59,22 @@ def test_the_helper_steps_the_cloth_of_a_config():
     assert done.returncode == 0, done.stderr
 
 
-def test_stop_ends_a_helper_that_still_runs():
+def test_a_helper_that_failed_is_a_warning(caplog):
+    failed = subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
+    failed.wait()
+    with caplog.at_level("WARNING", logger="windbench"):
+        compile_ahead.stop(failed)
+    assert "failed with status 3" in caplog.text
+
+
+def test_stop_ends_a_helper_that_still_runs_and_says_nothing_of_it(caplog):
     sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     start = time.monotonic()
-    compile_ahead.stop(sleeper)
+    with caplog.at_level("WARNING", logger="windbench"):
+        compile_ahead.stop(sleeper)
+        compile_ahead.stop(sleeper)  # after the first step, then as the run ends
     assert sleeper.returncode is not None and time.monotonic() - start < 30
+    assert caplog.text == ""
     compile_ahead.stop(None)  # no helper: nothing to do
 
 

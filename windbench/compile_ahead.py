@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import subprocess
 import sys
 from contextlib import contextmanager
@@ -76,17 +77,31 @@ def start(cfg: DictConfig, jobs: int) -> subprocess.Popen | None:
         env=env,
         text=True,
     )
-    helper.stdin.write(OmegaConf.to_yaml(cfg, resolve=True))
-    helper.stdin.close()
+    try:
+        helper.stdin.write(OmegaConf.to_yaml(cfg, resolve=True))
+        helper.stdin.close()
+    except OSError:  # it died at once: the run compiles everything itself
+        stop(helper)
+        return None
     log.info("empty numba cache: process %d compiles the cloth kernels meanwhile", helper.pid)
     return helper
 
 
 def stop(helper: subprocess.Popen | None) -> None:
-    """End the helper if it still runs."""
-    if helper is not None and helper.poll() is None:
+    """End the helper if it still runs; a warning if it failed (the run then compiled
+    what the helper did not)."""
+    if helper is None:
+        return
+    if helper.poll() is None:
         helper.terminate()
         helper.wait()
+    elif helper.returncode not in (0, -signal.SIGTERM):  # SIGTERM: stopped here before
+        log.warning(
+            "the compile helper (process %d) failed with status %d; this run compiled its "
+            "cloth kernels itself (python -m windbench.compile_ahead < config.yaml shows why)",
+            helper.pid,
+            helper.returncode,
+        )
 
 
 @contextmanager
