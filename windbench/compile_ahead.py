@@ -67,6 +67,7 @@ def start(cfg: DictConfig, jobs: int) -> subprocess.Popen | None:
     help (:func:`wanted`, :func:`cache_is_cold`)."""
     if not (wanted(cfg, jobs) and cache_is_cold()):
         return None
+    config = OmegaConf.to_yaml(cfg, resolve=True)  # as the dataset records it
     path = os.pathsep.join(p for p in (str(PACKAGE_ROOT), os.environ.get("PYTHONPATH")) if p)
     env = {**os.environ, "NUMBA_NUM_THREADS": "1", "PYTHONPATH": path}
     helper = subprocess.Popen(
@@ -78,7 +79,7 @@ def start(cfg: DictConfig, jobs: int) -> subprocess.Popen | None:
         text=True,
     )
     try:
-        helper.stdin.write(OmegaConf.to_yaml(cfg, resolve=True))
+        helper.stdin.write(config)
         helper.stdin.close()
     except OSError:  # it died at once: the run compiles everything itself
         stop(helper)
