@@ -4,23 +4,25 @@ the run compiles its wind's.
 numba compiles one function at a time in a process (its compiler holds a lock), so a run
 on an empty cache compiles its geometry, wind, aerodynamics and cloth kernels one after
 the other on one core, the second core idle: a first Navier-Stokes run of the smoke scene
-spends all but a few of its seconds compiling, about 40 % of them on the cloth. Here a
-helper process (``python -m windbench.compile_ahead``, one numba thread, the run's config
-on its standard input) builds the scene's cloth and steps it once in still air, with the
-aerodynamic forces and the cloth's per-step figures: every cloth kernel the run will call,
-with the argument types the run will give them, compiled into numba's cache. The run
-meanwhile compiles its wind; when it reaches the cloth, numba's dispatchers find in the
-cache what the helper has finished (each checks the cache before it compiles) and compile
-only the rest. The numbers are the same either way: the same code, compiled once.
+spends nearly all its time compiling, 43 of 94 s on the cloth
+(``experiments/compile_times.py``). Here a helper process (``python -m
+windbench.compile_ahead``, one numba thread, the run's config on its standard input)
+builds the scene's cloth and steps it once in still air, with the aerodynamic forces and
+the cloth's per-step figures: every cloth kernel the run will call, with the argument
+types the run will give them, compiled into numba's cache. The run meanwhile compiles its
+wind; when it reaches the cloth, numba's dispatchers find in the cache what the helper
+has finished (each looks there before it compiles) and compile only the rest. The
+numbers are the same either way: the same code, compiled once.
 
 It starts only when it can help: ``runtime.compile_ahead`` is on, the cache holds no
 cloth frame kernel yet, the scene has cloth, the wind backend has many kernels of its own
 to compile meanwhile (``WindField.compiles_kernels``: the global field has few, and its
 run reaches the cloth at once) and a core is spare (the cores available at least twice
-the runs the launcher has in flight: a parallel sweep's runs already use every core). It is stopped once the run's first step is done (every kernel is compiled or loaded then,
-and the steps that are timed do not share their cores with it), or when the run ends
-sooner; stopped halfway, it leaves only whole cache files (numba writes each to a
-temporary file and renames it).
+the runs the launcher has in flight: a parallel sweep's runs already use every core). It
+is stopped once the run's first step is done (every kernel is compiled or loaded then,
+and the timed steps do not share their cores with it), or when the run ends sooner;
+stopped halfway, it leaves only whole cache files (numba writes each to a temporary file
+and renames it).
 """
 
 from __future__ import annotations
