@@ -4,7 +4,8 @@
         [--top 25] [--out experiments/results/compile_times.csv]
 
 Runs ``windbench <overrides>`` (default: the smoke sweep of the README's first command, on the
-basic launcher so that every compilation happens here) in this process with an empty numba
+basic launcher, and always ``runtime.compile_ahead=false``, so that every compilation
+happens here, none in a helper process) in this process with an empty numba
 cache (a temporary NUMBA_CACHE_DIR, set before numba is imported) and records numba's
 ``numba:compile`` events: per compiled function its own compile CPU seconds (process time:
 a callee compiled while its caller compiles is counted once, for the callee), the number
@@ -78,7 +79,8 @@ def main():
 
         listener = compile_recorder()
         sweep = args.keep or sweep
-        sys.argv = ["windbench", *overrides, f"hydra.sweep.dir={sweep}", f"hydra.run.dir={sweep}"]
+        here = [*overrides, "runtime.compile_ahead=false"]  # no helper process
+        sys.argv = ["windbench", *here, f"hydra.sweep.dir={sweep}", f"hydra.run.dir={sweep}"]
         start, cpu = time.perf_counter(), time.process_time()
         try:
             windbench()

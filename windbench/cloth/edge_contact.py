@@ -272,19 +272,21 @@ def surface_contacts(contacts, inv_mass, edges, triangles, p, clear):
     (:func:`project_edge`, :func:`project_triangle`); ``clear`` the vertex contacts'
     clearances (module docstring: skipping)."""
     normal, beta = np.empty(3), np.empty(2)
-    near = _near_ones(contacts.boxes, inv_mass, p, edges, 2)
+    near = _near_ones(contacts.boxes, inv_mass, p, edges)
     for e in near:
         _near_edge(contacts, inv_mass, p, edges[e], clear, normal, beta)
-    near = _near_ones(contacts.boxes, inv_mass, p, triangles, 3)
+    near = _near_ones(contacts.boxes, inv_mass, p, triangles)
     for f in near:
         _near_triangle(contacts, inv_mass, p, triangles[f], clear, normal)
 
 
 @njit(cache=True)
-def _near_ones(boxes, inv_mass, p, prims, corners):
-    """The edges or triangles (``corners`` 2 or 3) without a pinned corner whose box meets
-    a body's grown box. A loop of its own: with the contact calls in the same loop numba
-    keeps reference counts inside it, 20 times the cost of the box tests."""
+def _near_ones(boxes, inv_mass, p, prims):
+    """The edges or triangles (rows of 2 or 3 corners) without a pinned corner whose box
+    meets a body's grown box. A loop of its own: with the contact calls in the same loop
+    numba keeps reference counts inside it, 20 times the cost of the box tests. The corner
+    count is read from ``prims``, not passed: a literal 2 or 3 compiled it twice."""
+    corners = prims.shape[1]
     out = np.empty(prims.shape[0], np.int64)
     found = 0
     for e in range(prims.shape[0]):

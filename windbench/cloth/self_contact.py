@@ -614,7 +614,7 @@ def _close_vertices(sc, p, box, pairs, found, reach):
     order, first, count = tree.order, tree.first, tree.count
     vert_ptr, leaf_vert = tree.vert_ptr, tree.leaf_vert
     vt = np.empty((64, 2), np.int64)
-    n_vt = 0
+    n_vt = np.int64(0)  # not the literal 0: :func:`_append` would be compiled for it
     for q in range(found):
         a, b = pairs[q, 0], pairs[q, 1]
         for side in range(1 if a == b else 2):
@@ -641,7 +641,7 @@ def _close_edges(tree, p, box, pairs, found, reach):
     edge_ptr, edges = tree.edge_ptr, tree.leaf_edge
     eb = _edge_boxes(p, edges)
     ee = np.empty((64, 2), np.int64)
-    n_ee = 0
+    n_ee = np.int64(0)  # as in :func:`_close_vertices`
     for q in range(found):
         a, b = pairs[q, 0], pairs[q, 1]
         for e in range(edge_ptr[a], edge_ptr[a + 1]):
@@ -815,7 +815,7 @@ def _crossing_candidates(sc, p, pairs, found):
     of plain arrays and scalar tests (the segment tests come after it)."""
     tree, triangles = sc.tree, sc.triangles
     out = np.empty((64, 2), np.int64)
-    n = 0
+    n = np.int64(0)  # as in :func:`_close_vertices`
     for q in range(found):
         a, b = pairs[q, 0], pairs[q, 1]
         for j in range(tree.first[a], tree.first[a] + tree.count[a]):
