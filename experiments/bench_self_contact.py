@@ -10,7 +10,12 @@ boxes and cones, the leaf-pair search (``leaf_pairs``), the close-pair search
 (``self_contacts``, on a copy), with the counts each one hands on. A leaf pair whose two
 patches' triangles keep their normals within the contact cone (60 degrees) of their mean
 is counted as ``flat_leaf_pairs``: how many of the tested pairs are neighbours on a gently
-curved sheet rather than layers that may touch.
+curved sheet rather than layers that may touch. Of the pairs of two patches,
+``adjacent_leaf_pairs`` share a vertex; ``bridged_leaf_pairs`` do not, but a third leaf
+shares a vertex with each and the three together pass the pass's own flatness test (each
+patch connected, the cone around their normals, bounded as ``leaf_pairs`` bounds it,
+within the contact cone): a connected flat patch holds both, so the test that skips a
+flat patch's own pairs would skip them too, were it applied to such triples.
 
     PYTHONPATH=$PWD python experiments/bench_self_contact.py [--frames 60] [--sizes 40x25 64x64]
 
@@ -39,7 +44,7 @@ FIELDS = [
     "date", "code", "nu", "nv", "triangles", "leaves", "substeps", "frames",
     "passes_per_frame", "passes_per_frame_max", "ms_frame_median", "ms_refit",
     "ms_leaf_pairs", "ms_close_pairs", "ms_pass", "leaf_pairs", "flat_leaf_pairs",
-    "vertex_triangle_pairs", "edge_pairs", "pushed", "load_average_1min",
+    "adjacent_leaf_pairs", "bridged_leaf_pairs", "vertex_triangle_pairs", "edge_pairs", "pushed", "load_average_1min",
 ]  # fmt: skip
 
 
@@ -68,6 +73,43 @@ def flat_pairs(sc, fit, pairs) -> int:
     return count
 
 
+def leaf_neighbours(sc) -> dict[int, set[int]]:
+    """leaf -> the other leaves that share a vertex with it."""
+    tree, tri = sc.tree, sc.triangles
+    verts = {
+        int(k): {
+            int(v) for v in tri[tree.order[tree.first[k] : tree.first[k] + tree.count[k]]].ravel()
+        }
+        for k in np.flatnonzero(tree.left < 0)
+    }
+    by_vertex: dict[int, set[int]] = {}
+    for k, vs in verts.items():
+        for v in vs:
+            by_vertex.setdefault(v, set()).add(k)
+    return {k: set().union(*(by_vertex[v] for v in vs)) - {k} for k, vs in verts.items()}
+
+
+def bridged_pairs(sc, fit, pairs) -> tuple[int, int]:
+    """(adjacent, bridged) pairs of two leaves (module docstring)."""
+    tree, cone = sc.tree, fit.cone
+    nb = leaf_neighbours(sc)
+
+    def flat(ids) -> bool:
+        s = cone[ids, :3].sum(axis=0)
+        cos = min(sc_kernels._widened(s[0], s[1], s[2], cone, k)[0] for k in ids)
+        return bool(tree.connected[ids].all() and cos > sc_kernels._COS_CONTACT)
+
+    adjacent = bridged = 0
+    for a, b in (tuple(int(k) for k in p) for p in pairs):
+        if a == b:
+            continue
+        if b in nb[a]:
+            adjacent += 1
+        elif any(flat([a, b, c]) for c in nb[a] & nb[b]):
+            bridged += 1
+    return adjacent, bridged
+
+
 def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
     """One row: the pass count over ``frames`` frames and the phases of one pass."""
     sim = flag_simulation((nu, nv), frames + warmup, False, ["cloth.self_collision=true"])
@@ -92,6 +134,7 @@ def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
     ms_close, (vt, ee) = median_ms(
         sc_kernels.close_pairs, sc, x, fit.box, pairs, found, reach, repeats=repeats
     )
+    adjacent, bridged = bridged_pairs(sc, fit, pairs[:found])
     inv_mass = solver.tables.constraints.inv_mass
     ms_pass, pushed = median_ms(
         lambda: sc_kernels.self_contacts(sc, inv_mass, x.copy(), x, fit, reach), repeats=repeats
@@ -114,6 +157,8 @@ def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
         "ms_pass": round(ms_pass, 3),
         "leaf_pairs": int(found),
         "flat_leaf_pairs": flat_pairs(sc, fit, pairs[:found]),
+        "adjacent_leaf_pairs": adjacent,
+        "bridged_leaf_pairs": bridged,
         "vertex_triangle_pairs": len(vt),
         "edge_pairs": len(ee),
         "pushed": int(pushed),
@@ -133,7 +178,7 @@ def main() -> None:
     for size in args.sizes:
         nu, nv = (int(k) for k in size.split("x"))
         rows.append(measure(nu, nv, args.frames, args.warmup, args.repeats))
-    shown = ["nu", "nv", "passes_per_frame", "ms_pass", "leaf_pairs", "flat_leaf_pairs"]
+    shown = ["nu", "nv", "passes_per_frame", "ms_pass", "leaf_pairs", "bridged_leaf_pairs"]
     show_and_append(args.out, rows, FIELDS, shown)
 
 
