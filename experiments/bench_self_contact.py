@@ -44,7 +44,8 @@ FIELDS = [
     "date", "code", "nu", "nv", "triangles", "leaves", "substeps", "frames",
     "passes_per_frame", "passes_per_frame_max", "ms_frame_median", "ms_refit",
     "ms_leaf_pairs", "ms_close_pairs", "ms_pass", "leaf_pairs", "flat_leaf_pairs",
-    "adjacent_leaf_pairs", "bridged_leaf_pairs", "vertex_triangle_pairs", "edge_pairs", "pushed", "load_average_1min",
+    "adjacent_leaf_pairs", "bridged_leaf_pairs", "vertex_triangle_pairs", "edge_pairs",
+    "pushed", "load_average_1min",
 ]  # fmt: skip
 
 
