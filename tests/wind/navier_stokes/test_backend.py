@@ -18,7 +18,7 @@ from windbench.simulate import run
 from windbench.wind.base import Obstacles
 from windbench.wind.navier_stokes import threads as versions
 
-pytestmark = pytest.mark.heavy  # compiles the kernels' parallel versions
+pytestmark = pytest.mark.heavy  # compiles kernels of its own (the projection coupling's)
 
 FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
 NO_OBSTACLES = Obstacles.rigid_only(())
@@ -243,6 +243,7 @@ def test_cloth_sheet_shelters_with_projection_coupling(mode):
         assert speed < 2.0
 
 
+@pytest.mark.slow  # compiles every kernel's parallel version: 60 CPU s on an empty cache
 @pytest.mark.parametrize(
     "params",
     [
@@ -254,7 +255,8 @@ def test_same_input_same_numbers_bit_for_bit(monkeypatch, params):
     """The kernels' parallel versions on all threads and on one thread, and their serial
     versions (threads.py): the same bits (every sum of the solver is taken in an order
     that does not depend on the threads). The two cases between them run every kernel
-    that has two versions."""
+    that has two versions. Slow: only grids of PARALLEL_CELLS cells and more run the
+    parallel versions, and no other test of the default suite compiles them."""
     boundary, sources, bodies, _ = CASES["inflow_outflow_body"]
     runs = []
     all_threads = numba.get_num_threads()

@@ -40,7 +40,12 @@ def test_float32_free_stream_stays_uniform_to_its_rounding():
 @pytest.mark.parametrize(
     "overrides",
     [
-        ["wind.advection=second_order", "wind.turbulence=mixing_length"],
+        # slow: compiles the second-order scheme in both precisions (16 CPU s on an empty
+        # cache)
+        pytest.param(
+            ["wind.advection=second_order", "wind.turbulence=mixing_length"],
+            marks=pytest.mark.slow,
+        ),
         ["wind.advection=semi_lagrangian", "wind.turbulence=smagorinsky"],
     ],
     ids=["second_order", "smagorinsky"],
