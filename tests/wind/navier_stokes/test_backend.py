@@ -243,7 +243,7 @@ def test_cloth_sheet_shelters_with_projection_coupling(mode):
         assert speed < 2.0
 
 
-@pytest.mark.slow  # compiles every kernel's parallel version: 60 CPU s on an empty cache
+@pytest.mark.slow  # compiles every kernel's parallel version: 65 CPU s on an empty cache
 @pytest.mark.parametrize(
     "params",
     [
