@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from windbench.cli import compose_config
+from windbench.compile_ahead import cache_is_cold
 from windbench.simulate import run
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -18,19 +19,13 @@ ROOT = Path(__file__).resolve().parent.parent
 WARM_UP = ["-m", "experiment=smoke", "sim.spinup=0", "sim.duration=0.04", "output.snapshots=1"]
 
 
-def _cache_is_empty() -> bool:
-    """No compiled cloth frame in numba's cache (a fresh clone): the tell-tale of a cold run."""
-    where = Path(os.environ.get("NUMBA_CACHE_DIR") or ROOT / "windbench")
-    return not any(where.rglob("solver.xpbd_frame-*.nbi"))
-
-
 def pytest_configure(config):
     """With several test processes (pytest-xdist) and an empty numba cache, compile the
     kernels once here, before the processes start: each would otherwise compile the same
     kernels at the same time (the cache is shared only once a kernel is written)."""
     if hasattr(config, "workerinput") or (config.getoption("numprocesses", 0) or 0) < 2:
         return
-    if not _cache_is_empty():
+    if not cache_is_cold():  # no compiled cloth frame: a fresh clone
         return
     print("windbench: empty numba cache: compiling the kernels once (about a minute on 2 cores)")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
