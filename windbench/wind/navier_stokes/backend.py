@@ -31,7 +31,7 @@ field is the superposed sources, zero at bodies, projected. Cells whose centre l
 rigid body are solid: every face touching one has zero velocity (the paper's interior
 check), or a moving body's velocity there (:meth:`NavierStokesWind._move_bodies`).
 ``wind.precision=float32`` stores the velocity, its scratch and the pressure solve's
-vectors in single precision (half the bytes each kernel moves); the pressure, the
+vectors, and interpolates the advection, in single precision; the pressure, the other
 arithmetic, every sum and the viscous solve's iterate stay double, and the pressure
 tolerance is at least TOLERANCE_FLOOR.
 
