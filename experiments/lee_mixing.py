@@ -1,7 +1,7 @@
 """The particles' two lee models against the Navier-Stokes reference: lee error, flux, wake
 and cost (windbench/wind/particles/mixing.py).
 
-    PYTHONPATH=$PWD python experiments/lee_mixing.py RUNS... --reference REF...
+    PYTHONPATH=$PWD python experiments/lee_mixing.py RUNS... --reference REF... [--out CSV]
     PYTHONPATH=$PWD python experiments/lee_mixing.py --cost [--steps N]
 
 The first form reads the particle runs under RUNS (e.g. multirun/fence,
@@ -199,12 +199,14 @@ def main(argv=None) -> None:
     ap.add_argument("--reference", nargs="*", type=Path, default=[])
     ap.add_argument("--cost", action="store_true")
     ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--out", type=Path, help="the table to write (default: by the form)")
     args = ap.parse_args(argv)
     RESULTS.mkdir(exist_ok=True)
     if args.cost:
         df, out = cost_rows(args.steps), RESULTS / "lee_mixing_cost.csv"
     else:
         df, out = run_rows(args.runs, args.reference), RESULTS / "lee_mixing.csv"
+    out = args.out or out
     df.to_csv(out, index=False, float_format="%.6g")
     print(df.to_string(index=False))
     print(f"wrote {out}")

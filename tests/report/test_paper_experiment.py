@@ -7,7 +7,10 @@ levels; every run they hold passes the run checks (no ConfigError mid-sweep)."""
 from __future__ import annotations
 
 import itertools
+import re
+from pathlib import Path
 
+import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
@@ -19,6 +22,7 @@ pytestmark = pytest.mark.heavy  # runs a run of each paper sweep
 
 PAPER_SCENES = {"flag", "two_flags_wall", "shirt", "opposing_sources"}
 BACKENDS = {"global", "particles", "navier_stokes"}
+CONF = Path(CONFIG_DIR)
 
 
 def _sweep(experiment: str, *overrides: str) -> dict[str, list[str]]:
@@ -55,8 +59,27 @@ def test_the_sweeps_cover_backends_scenes_resolutions_seeds_and_references():
     assert set(reference["scene"]) == PAPER_SCENES
     levels = _resolutions(reference)
     assert len(levels) == 3 and levels[-1] >= 2 * compared[-1]
-    fence_levels = [64, 128, 256]  # the fence's reference (paper.yaml's command)
-    assert fence_levels[-1] >= 2 * _resolutions(fence)[-1]
+    assert _fence_reference_levels()[-1] >= 2 * _resolutions(fence)[-1]
+
+
+def _fence_reference_levels() -> list[int]:
+    """The fence reference's resolutions, from the command in paper.yaml's header."""
+    text = (CONF / "experiment" / "paper.yaml").read_text()
+    (levels,) = re.findall(r"scene=fence grid\.resolution=([\d,]+)", text)
+    return sorted(int(r) for r in levels.split(","))
+
+
+def test_every_fence_level_puts_cell_faces_on_the_fences_faces():
+    """The compared fence runs and the fence reference resolve the same fence: at each
+    level the cell size divides the fence's position, thickness and height (measured from
+    the domain's corner), so the fence fills whole cells and is 2 m tall at every level."""
+    scene = compose_config(["scene=fence"]).scene
+    lower, upper = np.array(scene.domain.min), np.array(scene.domain.max)
+    (fence,) = scene.bodies
+    corners = np.array([fence.min, fence.max]) - lower
+    for res in [*_resolutions(_sweep("fence")), *_fence_reference_levels()]:
+        h = (upper - lower).max() / res
+        assert np.allclose(corners / h, np.round(corners / h), atol=1e-9), res
 
 
 @pytest.mark.parametrize("experiment", ["paper", "paper_seeds", "paper_mixing", "reference"])
