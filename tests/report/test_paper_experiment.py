@@ -73,8 +73,8 @@ def _fence_reference_levels() -> list[int]:
 def test_every_fence_level_resolves_the_same_fence():
     """The compared fence runs and the fence reference resolve the same fence: at each
     level the solid cells (those whose centre lies in the fence) fill exactly the fence's
-    box, 2 m tall and 1 m thick, because cell faces lie on its faces. (At 128 cells along
-    the 47 m the fence was 1.84 m tall, at 256 2.02 m.)"""
+    box, 2 m tall and 1 m thick, because cell faces lie on its faces (at 128 cells along the
+    47 m it would be 1.84 m tall, at 256 2.02 m)."""
     for res in sorted({*_resolutions(_sweep("fence")), *_fence_reference_levels()}):
         cfg = compose_config(["scene=fence", "wind=global", f"grid.resolution={res}"])
         setup = prepare(cfg)
