@@ -16,9 +16,10 @@ from windbench.cloth.mesh import ClothMesh, mesh_from_config
 from windbench.errors import ConfigError
 from windbench.geometry.bodies import Body, body_from_config
 from windbench.wind.primitives import Primitive, primitive_from_config
+from windbench.wind.surface_layer import ground_roughness
 
 FACES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
-BOUNDARY_KINDS = ("inflow", "outflow", "slip", "no_slip", "periodic")
+BOUNDARY_KINDS = ("inflow", "outflow", "slip", "no_slip", "periodic", "rough")
 
 
 @dataclass(frozen=True)
@@ -145,6 +146,10 @@ def _check_boundary(boundary: Mapping) -> dict:
             raise ConfigError(
                 f"scene.boundary.{face}", f"must be one of {list(BOUNDARY_KINDS)}, got {kind!r}"
             )
+        if kind == "rough" and face != "z_min":
+            raise ConfigError(
+                f"scene.boundary.{face}", "rough is the ground's kind: allowed on z_min only"
+            )
         out[face] = kind
     for axis in "xyz":
         lo, hi = out[f"{axis}_min"], out[f"{axis}_max"]
@@ -169,6 +174,8 @@ def build_scene(cfg) -> Scene:
         wall_velocity[face] = np.asarray(vel, dtype=float)
     specs = tuple(cfg.get("sources") or ())
     sources = tuple(primitive_from_config(s, f"scene.sources[{i}]") for i, s in enumerate(specs))
+    if boundary["z_min"] == "rough":
+        ground_roughness(sources)
     bodies = tuple(
         body_from_config(b, f"scene.bodies[{i}]") for i, b in enumerate(cfg.get("bodies") or ())
     )

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from windbench.wind.primitives import superpose
+from windbench.errors import ConfigError
+from windbench.wind.primitives import LOG_PROFILE, superpose
 
 KARMAN = 0.41  # von Karman's constant
 MIXING_LENGTH_LIMIT = 40.0  # m, Blackadar's lambda (the wind.mixing_length_limit default)
@@ -40,3 +41,17 @@ def sources_viscosity(sources, heights, lower, upper, limit: float, eps: float) 
     down[:, 2] -= eps
     shear = np.linalg.norm(superpose(sources, up) - superpose(sources, down), axis=1) / (2 * eps)
     return surface_layer_viscosity(np.asarray(heights) - lower[2], shear, limit)
+
+
+def ground_roughness(sources) -> tuple[float, float]:
+    """(z_0, ground height) (m) of a rough ground (``scene.boundary.z_min: rough``): the
+    log profile of the sources, which must agree (ConfigError naming the key otherwise)."""
+    found = {(s.profile[1], s.profile[3]) for s in sources if s.profile[0] == LOG_PROFILE}
+    if len(found) != 1:
+        got = "none has one" if not found else f"they differ: {sorted(found)}"
+        raise ConfigError(
+            "scene.boundary.z_min",
+            "rough takes its roughness length from the sources' log profile (one z_0 and "
+            f"ground for all of them); {got}",
+        )
+    return found.pop()

@@ -7,8 +7,8 @@ One step of ``dt``, each operator in its own module:
 1. cloth coupling, "prior to any other operation" (:mod:`.coupling`, ``wind.coupling``);
 2. forces (:mod:`.forcing`): ``wind.body_force`` and the interior flow primitives; a
    source or sink also emits its volume as a divergence target of the projection;
-3. eddy viscosity of the mean flow, ``wind.turbulence`` (:mod:`.turbulence`): the surface
-   layer's K-theory of the sources' profile (default), Smagorinsky's subgrid model, or none;
+3. eddy viscosity, ``wind.turbulence`` (:mod:`.turbulence`): the surface layer's K of the
+   sources' profile (default), Smagorinsky's, or none; a rough ground's stress (:mod:`.wall_law`);
 4. advection (:mod:`.advection`) and viscosity (:mod:`.diffusion`), ``wind.advection``:
    ``semi_lagrangian`` (the paper's scheme: RK2 backtrace, trilinear interpolation) or
    limited ``maccormack``, each followed by implicit (backward Euler) viscosity — first
@@ -62,6 +62,7 @@ from windbench.wind.navier_stokes import (
     threads,
     trapezoid,
     turbulence,
+    wall_law,
 )
 from windbench.wind.navier_stokes.boundaries import (
     INFLOW,
@@ -69,6 +70,7 @@ from windbench.wind.navier_stokes.boundaries import (
     OPENING,
     OUTFLOW,
     PERIODIC,
+    ROUGH,
     component_origin,
     padded_shape,
 )
@@ -184,8 +186,11 @@ class NavierStokesWind(WindField):
 
     @classmethod
     def check(cls, scene, grid, params) -> None:
-        """ConfigError for bad ``wind.*`` values (called by simulate.prepare)."""
+        """ConfigError for bad ``wind.*`` values and a grid too fine for the rough ground's
+        wall law (called by simulate.prepare)."""
         _check(params)
+        if scene.boundary["z_min"] == "rough":
+            wall_law.drag_coefficient(scene, float(grid.lower[2]), float(grid.h))
 
     def __init__(self, scene, grid, params):
         _check(params)
@@ -211,6 +216,11 @@ class NavierStokesWind(WindField):
         self.cells = np.asarray(grid.shape, dtype=np.int64)
         self.solid = self._solid.astype(np.uint8)
         self.kinds = self._face_kinds(scene)
+        self.wall_drag = (  # C_D of the rough ground (:mod:`.wall_law`), 0: none
+            wall_law.drag_coefficient(scene, self.lower[2], self.h)
+            if self.kinds[4] == ROUGH
+            else 0.0
+        )
         self.periodic = np.array([self.kinds[2 * a] == PERIODIC for a in range(3)])
         # axes that carry a derivative: not a one-cell periodic axis (2D problems)
         self.axes = np.array([not (self.periodic[a] and shape[a] == 1) for a in range(3)], np.int64)
@@ -227,6 +237,7 @@ class NavierStokesWind(WindField):
         # state: the three padded face arrays, pressure (warm start) and work arrays
         self.q = [np.zeros(padded_shape(shape, a), self.dtype) for a in range(3)]
         self.work = [np.zeros_like(x) for x in self.q]
+        self._floor_scratch = wall_law.scratch_plane(self.q[0]) if self.wall_drag else None
         limited = self.advection in ("maccormack", "second_order")
         self.work2 = [np.zeros_like(x) for x in self.q] if limited else None
         single = self.dtype != np.float64  # the viscous solve's iterate: float64 scratch
@@ -511,6 +522,16 @@ class NavierStokesWind(WindField):
             self._apply_boundaries(set_normal=True)
         return peak, substeps
 
+    def _ground_drag(self, dt) -> None:
+        """The rough ground's stress on the first layer of cells (:mod:`.wall_law`)."""
+        if not self.wall_drag:
+            return
+        rate = dt * self.wall_drag / self.h
+        wall_law.floor_drag(
+            self.q[0], self.q[1], self.free[0], self.free[1], rate, self._floor_scratch
+        )
+        self._apply_boundaries(set_normal=True)
+
     def _forces(self, dt):
         forced = bool(np.any(self.body_force != 0.0))
         for a in range(3):
@@ -701,6 +722,7 @@ class NavierStokesWind(WindField):
         self._forces(dt)
         te = time.perf_counter()
         nu_max, substeps = self._eddy_diffusion(dt)
+        self._ground_drag(dt)
         t1 = time.perf_counter()
         if self.advection == "second_order":
             sweeps = self._advect_diffuse_second_order(dt)

@@ -17,6 +17,8 @@ opening    = w_in before the projection,    as inflow
 outflow    free (pressure p = 0)           ghost = interior (zero normal gradient)
 slip       = wall velocity . n (0)        ghost = interior (no shear stress)
 no_slip    = wall velocity . n (0)        ghost = 2 U_wall - interior (the lid velocity)
+rough      = 0 (the ground)                ghost = interior; the stress is the wall law's
+                                           (:mod:`.wall_law`), not the ghost's
 periodic   face n = face 0                 ghost = the opposite interior cell
 ========== ============================== ==============================================
 
@@ -30,13 +32,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-INFLOW, OUTFLOW, SLIP, NO_SLIP, PERIODIC, OPENING = 0, 1, 2, 3, 4, 5
+INFLOW, OUTFLOW, SLIP, NO_SLIP, PERIODIC, OPENING, ROUGH = 0, 1, 2, 3, 4, 5, 6
 KIND_CODES = {
     "inflow": INFLOW,
     "outflow": OUTFLOW,
     "slip": SLIP,
     "no_slip": NO_SLIP,
     "periodic": PERIODIC,
+    "rough": ROUGH,
 }
 FACE_NAMES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
 # the padded low ghost layer and the first inner one, as int64 values: a literal index
@@ -168,7 +171,7 @@ def fill_boundary(q, a, kinds, planes, set_normal):
                 kind = lo_kind if side == 0 else hi_kind
                 ghost = _layer(q, b, 0 if side == 0 else n_b + 1)
                 inner = _layer(q, b, 1 if side == 0 else n_b)
-                if kind == SLIP or kind == OUTFLOW:
+                if kind == SLIP or kind == OUTFLOW or kind == ROUGH:
                     _copy_plane(ghost, inner)
                 else:  # inflow, opening, no_slip: the wall value at the face
                     _mirror(ghost, inner, planes[2 * b + side])
@@ -194,7 +197,7 @@ def boundary_planes(kinds, wall_values, inflow_fn, lower, upper, h, shape):
                 vals = inflow_fn(pts.reshape(-1, 3), face)[:, a].reshape(pts.shape[:2])
             else:
                 vals = np.full(pts.shape[:2], float(wall_values[face][a]))
-                if kind == SLIP and a == face // 2:
+                if kind in (SLIP, ROUGH) and a == face // 2:
                     vals[:] = 0.0
             arr[face, : vals.shape[0], : vals.shape[1]] = vals
         out.append(arr)

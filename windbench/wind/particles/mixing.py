@@ -67,6 +67,7 @@ from windbench.wind.surface_layer import sources_viscosity
 
 LEAVE, MIRROR, WRAP = 0, 1, 2  # what a domain face does to a particle that reaches it
 FACE_ACTIONS = {"inflow": LEAVE, "outflow": LEAVE, "slip": MIRROR, "no_slip": MIRROR}
+FACE_ACTIONS["rough"] = MIRROR
 FACE_ACTIONS["periodic"] = WRAP
 TABLE_NODES = 256  # heights of the K(z) table over the domain
 SHEAR_STEP = 1e-3  # central-difference step of the shear, in table spacings
@@ -124,7 +125,7 @@ def diffusivity_table(scene, grid, limit: float) -> tuple[np.ndarray, float, flo
 
 def face_actions(scene) -> np.ndarray:
     """(n_sources, 3, 2) LEAVE | MIRROR | WRAP of each domain face for each source's
-    particles: walls (slip, no_slip) and the faces the source blows in through mirror (the
+    particles: walls (slip, no_slip, rough) and the faces the source blows in through mirror (the
     gusts enter with their whole flux, none diffuses back out), periodic faces wrap, the
     other inflow and outflow faces let them leave."""
     b = scene.boundary
