@@ -216,11 +216,7 @@ class NavierStokesWind(WindField):
         self.cells = np.asarray(grid.shape, dtype=np.int64)
         self.solid = self._solid.astype(np.uint8)
         self.kinds = self._face_kinds(scene)
-        self.wall_drag = (  # C_D of the rough ground (:mod:`.wall_law`), 0: none
-            wall_law.drag_coefficient(scene, self.lower[2], self.h)
-            if self.kinds[4] == ROUGH
-            else 0.0
-        )
+        self.wall_drag = self._wall_drag(scene)  # C_D of a rough ground, 0: none
         self.periodic = np.array([self.kinds[2 * a] == PERIODIC for a in range(3)])
         # axes that carry a derivative: not a one-cell periodic axis (2D problems)
         self.axes = np.array([not (self.periodic[a] and shape[a] == 1) for a in range(3)], np.int64)
@@ -237,7 +233,6 @@ class NavierStokesWind(WindField):
         # state: the three padded face arrays, pressure (warm start) and work arrays
         self.q = [np.zeros(padded_shape(shape, a), self.dtype) for a in range(3)]
         self.work = [np.zeros_like(x) for x in self.q]
-        self._floor_scratch = wall_law.scratch_plane(self.q[0]) if self.wall_drag else None
         limited = self.advection in ("maccormack", "second_order")
         self.work2 = [np.zeros_like(x) for x in self.q] if limited else None
         single = self.dtype != np.float64  # the viscous solve's iterate: float64 scratch
@@ -278,6 +273,12 @@ class NavierStokesWind(WindField):
         self._initial_condition(scene)
 
     # ------------------------------------------------------------ set-up helpers
+
+    def _wall_drag(self, scene) -> float:
+        """C_D of the rough ground (:mod:`.wall_law`), 0 without one."""
+        if self.kinds[4] != ROUGH:
+            return 0.0
+        return wall_law.drag_coefficient(scene, self.lower[2], self.h)
 
     def _face_kinds(self, scene) -> np.ndarray:
         kinds = np.array([KIND_CODES[scene.boundary[f]] for f in boundaries.FACE_NAMES])
@@ -528,7 +529,12 @@ class NavierStokesWind(WindField):
             return
         rate = dt * self.wall_drag / self.h
         wall_law.floor_drag(
-            self.q[0], self.q[1], self.free[0], self.free[1], rate, self._floor_scratch
+            self.q[0],
+            self.q[1],
+            self.free[0],
+            self.free[1],
+            rate,
+            wall_law.scratch_plane(self.q[0]),
         )
         self._apply_boundaries(set_normal=True)
 
