@@ -216,7 +216,7 @@ class NavierStokesWind(WindField):
         self.cells = np.asarray(grid.shape, dtype=np.int64)
         self.solid = self._solid.astype(np.uint8)
         self.kinds = self._face_kinds(scene)
-        self.wall_drag = self._wall_drag(scene)  # C_D of a rough ground, 0: none
+        self.wall_drag, self._floor_scratch = self._rough_ground(scene, shape)
         self.periodic = np.array([self.kinds[2 * a] == PERIODIC for a in range(3)])
         # axes that carry a derivative: not a one-cell periodic axis (2D problems)
         self.axes = np.array([not (self.periodic[a] and shape[a] == 1) for a in range(3)], np.int64)
@@ -274,11 +274,13 @@ class NavierStokesWind(WindField):
 
     # ------------------------------------------------------------ set-up helpers
 
-    def _wall_drag(self, scene) -> float:
-        """C_D of the rough ground (:mod:`.wall_law`), 0 without one."""
+    def _rough_ground(self, scene, shape) -> tuple[float, np.ndarray | None]:
+        """(C_D of the rough ground, the wall law's scratch plane of the x faces)
+        (:mod:`.wall_law`); (0, None) without one."""
         if self.kinds[4] != ROUGH:
-            return 0.0
-        return wall_law.drag_coefficient(scene, self.lower[2], self.h)
+            return 0.0, None
+        plane = np.zeros(padded_shape(shape, 0)[:2], dtype=self.dtype)
+        return wall_law.drag_coefficient(scene, self.lower[2], self.h), plane
 
     def _face_kinds(self, scene) -> np.ndarray:
         kinds = np.array([KIND_CODES[scene.boundary[f]] for f in boundaries.FACE_NAMES])
@@ -534,7 +536,7 @@ class NavierStokesWind(WindField):
             self.free[0],
             self.free[1],
             rate,
-            wall_law.scratch_plane(self.q[0]),
+            self._floor_scratch,
         )
         self._apply_boundaries(set_normal=True)
 

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from windbench.errors import ConfigError
@@ -78,8 +77,3 @@ def floor_drag(u, v, free_u, free_v, rate, scratch):
         for j in range(1, u.shape[1] - 1):
             if free_u[i, j, FIRST]:
                 u[i, j, FIRST] = scratch[i, j]
-
-
-def scratch_plane(u: np.ndarray) -> np.ndarray:
-    """The scratch plane :func:`floor_drag` needs for the x faces ``u``."""
-    return np.zeros(u.shape[:2], dtype=u.dtype)
