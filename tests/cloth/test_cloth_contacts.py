@@ -19,8 +19,8 @@ from windbench.cloth.self_contact import (
     _vertex_near_triangle,
     close_pairs,
     leaf_pairs,
+    pair_reach,
     pass_due,
-    pass_reach,
     patch_tree,
     push_edges,
     refit,
@@ -30,6 +30,7 @@ from windbench.cloth.self_contact import (
     self_intersections,
     tree_fit,
     triangles_cross,
+    vertex_moves,
 )
 from windbench.cloth.solver import XPBDCloth
 from windbench.config import ClothConfig
@@ -308,7 +309,7 @@ def test_two_crossing_edges_are_pushed_to_the_thickness_with_momentum_kept(side)
     xp[2:, 2] = side * 0.01
     inv_mass = np.ones(4)
     before = p.copy()
-    c = push_edges(p, xp, inv_mass, 0, 1, 2, 3, 0.005, 0.02)
+    c = push_edges(p, xp, inv_mass, 0, 1, 2, 3, 0.005, vertex_moves(p, xp, np.empty(4)))
     assert c < 0.0
     gap = p[2:, 2].mean() - (0.7 * p[0, 2] + 0.3 * p[1, 2])  # closest points: s = 0.3, u = 0.5
     assert gap == pytest.approx(side * 0.005, abs=1e-12)
@@ -321,21 +322,20 @@ def _triangle(radius, z):
     return np.c_[radius * np.cos(a), radius * np.sin(a), np.full(3, z)]
 
 
-def test_a_layer_pushed_through_the_one_below_is_brought_back_by_a_second_pass():
-    """Three stacked triangles, thickness 5 mm (reach 20 mm): a heavy small one (V) that
-    crossed the light middle one (A, z = 0) to z = -19.5 mm, over a pinned wide one (B,
-    z = -21 mm, beyond A's reach). One pass pushes V up and A down, through B, which it
-    did not search: A crosses B. The second pass (the pass pushed a pair) finds A against
-    B and puts A back at B's thickness, z = -16 mm, with no crossing left."""
+def test_a_layer_pushed_through_the_one_below_is_brought_back_in_the_same_substep():
+    """Three stacked triangles, thickness 5 mm: a heavy small one (V) that crossed the
+    light middle one (A, z = 0) to z = -19.5 mm since the last pass, over a pinned wide one
+    (B, z = -21 mm). Pushing V up carries A down through B; the substep ends with A back at
+    B's thickness, z = -16 mm, and no crossing left. The pair A-B is searched (V's 23.5 mm
+    move widens the search to 52 mm) but judged at its own reach, 20 mm (its parts had not
+    moved). Whether one pass finds it depends on the order of the pairs; a pass that pushed
+    a pair is followed by a second, so that the result does not."""
     sizes, tris = (0.02, 0.1, 0.3), np.arange(9).reshape(3, 3)
     rest = np.vstack([_triangle(r, z) for r, z in zip(sizes, (0.04, 0.0, -0.04), strict=True)])
     start = np.vstack([_triangle(r, z) for r, z in zip(sizes, (0.004, 0.0, -0.021), strict=True)])
     p = np.vstack([_triangle(r, z) for r, z in zip(sizes, (-0.0195, 0.0, -0.021), strict=True)])
     inv_mass = np.r_[np.full(3, 0.01), np.ones(3), np.zeros(3)]
     sc = self_contact_model(rest, tris, 0.005)
-    one = p.copy()
-    assert self_contacts(sc, inv_mass, one, start, tree_fit(sc, 9), pass_reach(0.0, 0.005)) > 0
-    assert self_intersections(sc, one) == 1 and one[3:6, 2].min() < -0.021
     fit = tree_fit(sc, 9)
     fit.anchor[:] = start
     self_contact_substep(sc, inv_mass, p, start, fit, True)
@@ -346,20 +346,46 @@ def test_a_layer_pushed_through_the_one_below_is_brought_back_by_a_second_pass()
 def test_a_triangle_that_passed_a_layer_faster_than_the_base_reach_is_brought_back():
     """Thickness 5 mm, base reach 20 mm: a small triangle 10 mm above a pinned wide one at
     the last pass is 30 mm below it now (a 40 mm move, a free edge whipping at 16 m/s for
-    a substep of 2.5 ms). The pass searches within 2 x 40 + 5 mm and puts it back on its
-    side at the thickness, +5 mm; within the base reach it would stay below."""
+    a substep of 2.5 ms). The pass searches the pair within 40 + 0 + 5 mm and puts it back
+    on its side at the thickness, +5 mm; within the base reach it would stay below."""
     tris = np.arange(6).reshape(2, 3)
     rest = np.vstack([_triangle(0.02, 0.04), _triangle(0.3, 0.0)])
     start = np.vstack([_triangle(0.02, 0.01), _triangle(0.3, 0.0)])
     p = np.vstack([_triangle(0.02, -0.03), _triangle(0.3, 0.0)])
     inv_mass = np.r_[np.ones(3), np.zeros(3)]
     sc = self_contact_model(rest, tris, 0.005)
-    assert pass_reach(0.04, 0.005) == pytest.approx(0.085)
+    assert pair_reach(0.04, 0.0, 0.005) == pytest.approx(0.045)
     fit = tree_fit(sc, 6)
     fit.anchor[:] = start
     self_contact_substep(sc, inv_mass, p, start, fit, True)
     np.testing.assert_allclose(p[:3, 2], 0.005, atol=1e-12)
     np.testing.assert_array_equal(p[3:], start[3:])
+
+
+@pytest.mark.parametrize("height", [0.015, 0.03])
+def test_a_triangle_turned_over_does_not_carry_the_vertices_near_it_through_itself(height):
+    """A pinned triangle whose corner lies ``height`` above a triangle of which a corner
+    moved 2 mm across the opposite edge since the last pass (the triangle turned over, its
+    normal reversed), while a third triangle moved 100 mm: the corner lies on the same side
+    in space, so nothing is pushed. Read with the reversed normal it would be 15 or 30 mm on
+    the wrong side and be carried through to the thickness; the 30 mm case is also beyond
+    the pair's own reach (its parts moved 2 mm), which one reach for the whole cloth
+    (2 x 100 + 5 mm) did not keep it from."""
+    flat = np.array([[0.0, 0, 0], [0.1, 0, 0], [0.05, 0.001, 0]])
+    turned = flat.copy()
+    turned[2, 1] = -0.001
+    pinned = np.array([[0.05, -0.0003, height], [0.05, 0.05, height], [0.0, 0.05, height]])
+    runner = np.array([[1.0, 1.0, 1.0], [1.1, 1.0, 1.0], [1.0, 1.1, 1.0]])
+    start = np.vstack([flat, pinned, runner])
+    p = np.vstack([turned, pinned, runner + [0.0, 0.0, 0.1]])
+    inv_mass = np.r_[np.ones(3), np.zeros(3), np.ones(3)]
+    tris = np.arange(9).reshape(3, 3)
+    sc = self_contact_model(start, tris, 0.005)
+    fit = tree_fit(sc, 9)
+    fit.anchor[:] = start
+    before = p.copy()
+    assert self_contacts(sc, inv_mass, p, start, fit) == 0
+    np.testing.assert_array_equal(p, before)
 
 
 def test_a_scene_without_cloth_has_an_empty_patch_tree():

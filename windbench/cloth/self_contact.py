@@ -1,22 +1,24 @@
 """Self-collision and cloth-cloth collision: vertices against triangles and edges against
 edges, culled by a bounding-volume hierarchy with normal cones.
 
-The paper's cloth system [MKE03] keeps cloth from passing through itself. All cloth pieces
-of a scene are one mesh here (:class:`~windbench.cloth.model.ClothModel`), so one pass
-handles a flag folding on itself and two flags touching alike. It is thickness-based, not
-continuous: a vertex i closer than ``cloth.thickness`` to a triangle (a, b, c) it does not
-belong to, with its projection q = sum_k beta_k x_k inside the triangle, is pushed back to
-the thickness on the side it lay on at the last pass (sign s of its distance to the
-triangle's plane then):
+The paper's cloth system [MKE03] keeps cloth from passing through itself. All cloths are
+one mesh (:class:`~windbench.cloth.model.ClothModel`): one pass handles a flag folding on
+itself and two flags touching alike. Thickness-based, not continuous: a vertex i closer
+than ``cloth.thickness`` to a triangle (a, b, c) it does not belong to, with its projection
+q = sum_k beta_k x_k inside the triangle, is pushed back to the thickness on the side it
+lay on at the last pass (sign s of its distance to the triangle's plane then):
 
     C = s (x_i - q) . n - thickness < 0,   den = w_i + sum_k beta_k^2 w_k,
-    dx_i = -C w_i s n / den,   dx_k = C beta_k w_k s n / den.
+    dx_i = -C w_i s n / den,   dx_k = C beta_k w_k s n / den,
 
-A pass searches within max(REACH thickness, 2 d + thickness) of each plane, d the largest
-move of a vertex since the last pass: a vertex that crossed a triangle since then lies
-within 2 d of its plane, however fast the cloth moved. Edges that cross without a vertex
-near a triangle (a sheet draped over another's border) are kept apart the same way at
-their closest points (:func:`push_edges`, n = e1 x e2).
+skipped for a triangle turned over since (normal reversed: its sides swapped, not the
+vertex's). A pair is searched within max(REACH thickness, d_1 + d_2 + thickness) of the
+plane, d_1 and d_2 the largest moves since the last pass of the vertex and of the
+triangle's corners (:func:`pair_reach`): a crossing since then lies within d_1 + d_2 of the
+plane, and a pair that moved little is not pushed far because another part of the cloth
+moved fast. Edges that cross without a vertex near a triangle (a sheet draped over
+another's border) are kept apart the same way at their closest points (:func:`push_edges`,
+n = e1 x e2).
 
 Broad phase (:func:`leaf_pairs`): a fixed hierarchy of triangle patches
 (:func:`patch_tree`: median splits of the rest-pose centroids, leaves of at most LEAF
@@ -30,14 +32,12 @@ overlap itself in that projection, is not tested, as in most cloth solvers: the 
 miss a flat patch that overlaps itself (a twist, a spiral ramp) until it stops being flat.
 They use a narrower cone, CONTACT_CONE: within it, two points of the patch within the
 reach of each other lie within reach / cos(CONTACT_CONE) of each other along the surface,
-neighbours that the thickness test would reject anyway. A flag that only ripples costs the
-refit and the top of the tree.
+neighbours that the thickness test would reject anyway.
 
-The figure :func:`self_intersections` counts intersecting triangle pairs: two triangles
-without a common vertex of which an edge of one crosses the other (segment-triangle test,
-Moeller-Trumbore), through the same hierarchy by its boxes alone, so that it equals an
-all-pairs search (with the cones it missed two adjacent patches, within 90 degrees, that
-crossed in a crumpled flag).
+The figure :func:`self_intersections` counts intersecting triangle pairs (no common vertex,
+an edge of one crossing the other: Moeller-Trumbore) through the same hierarchy by its
+boxes alone, so that it equals an all-pairs search (the cones would miss two adjacent
+patches, within 90 degrees, that cross in a crumpled flag).
 """
 
 from __future__ import annotations
@@ -103,6 +103,7 @@ class TreeFit(NamedTuple):
     stack: np.ndarray  # (S, 2) node pairs still to visit
     anchor: np.ndarray  # (n, 3) positions at the last pass (:func:`self_contact_substep`)
     passes: np.ndarray  # (1,) passes in the current frame
+    moves: np.ndarray  # (n,) each vertex's move since the last pass (:func:`vertex_moves`)
 
 
 def _split(centroid, order, lo, hi, nodes, depth):
@@ -221,6 +222,7 @@ def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
         np.zeros((8 * (sc.tree.depth + 2), 2), np.int64),
         np.zeros((n_vertices, 3)),
         np.zeros(1, np.int64),
+        np.zeros(n_vertices),
     )
 
 
@@ -435,15 +437,16 @@ def _barycentric(p, tri, i, nx, ny, nz, area2, k):
 
 
 @njit(cache=True)
-def push_vertex(p, xp, inv_mass, i, tri, thickness, reach):
+def push_vertex(p, xp, inv_mass, i, tri, thickness, moves):
     """The vertex-triangle contact of vertex i and triangle ``tri`` (module docstring),
-    for a vertex within ``reach`` of the triangle's plane. Returns C (0 when they do not
-    touch)."""
+    for a vertex within the pair's reach (:func:`pair_reach` of the vertices' ``moves``
+    since ``xp``) of the triangle's plane. Returns C (0 when they do not touch)."""
     nx, ny, nz, area2 = _plane(p, tri)
     if area2 == 0.0:
         return 0.0
     dist = _height(p, tri, i, nx, ny, nz)
-    if abs(dist) >= reach:
+    corners = max(moves[tri[0]], moves[tri[1]], moves[tri[2]])
+    if abs(dist) >= pair_reach(moves[i], corners, thickness):
         return 0.0
     beta = (
         _barycentric(p, tri, i, nx, ny, nz, area2, 0),
@@ -453,6 +456,8 @@ def push_vertex(p, xp, inv_mass, i, tri, thickness, reach):
     if beta[0] < 0.0 or beta[1] < 0.0 or beta[2] < 0.0:
         return 0.0
     mx, my, mz, a0 = _plane(xp, tri)
+    if mx * nx + my * ny + mz * nz < 0.0:
+        return 0.0  # turned over since the last pass: its sides have swapped, not the vertex
     side = _height(xp, tri, i, mx, my, mz) if a0 > 0.0 else dist
     s = 1.0 if (side if side != 0.0 else dist) >= 0.0 else -1.0
     c = s * dist - thickness
@@ -509,12 +514,14 @@ def _segment_parameters(p, i, j, k, l):
 
 
 @njit(cache=True)
-def push_edges(p, xp, inv_mass, i, j, k, l, thickness, reach):
-    """The edge-edge contact of edges i-j and k-l closer than ``reach``: their closest
-    points q1, q2 (both inside the edges) kept ``thickness`` apart along n = e1 x e2 on the
-    side they lay on at ``xp``: C = s (q1 - q2) . n - thickness, the four vertices moved
-    with their barycentric weights w = (1 - s, s, -(1 - u), -u) and inverse masses.
-    Returns C (0 when they do not touch). Scalars only: it runs for every close pair."""
+def push_edges(p, xp, inv_mass, i, j, k, l, thickness, moves):
+    """The edge-edge contact of edges i-j and k-l closer than their reach
+    (:func:`pair_reach` of the vertices' ``moves`` since ``xp``): their closest points q1,
+    q2 (both inside the edges) kept ``thickness`` apart along n = e1 x e2 on the side they
+    lay on at ``xp``: C = s (q1 - q2) . n - thickness, the four vertices moved with their
+    barycentric weights w = (1 - s, s, -(1 - u), -u) and inverse masses. Returns C (0 when
+    they do not touch). Scalars only: it runs for every close pair."""
+    reach = pair_reach(max(moves[i], moves[j]), max(moves[k], moves[l]), thickness)
     s, u, gap2 = _segment_parameters(p, i, j, k, l)
     if s <= 0.0 or s >= 1.0 or u <= 0.0 or u >= 1.0 or gap2 >= reach * reach:
         return 0.0  # apart, or nearest at an end point: the vertex-triangle contacts' business
@@ -658,15 +665,19 @@ def _close_edges(tree, p, box, pairs, found, reach):
 
 
 @njit(cache=True)
-def self_contacts(sc, inv_mass, p, x0, fit, reach):
-    """One pass of the contacts of the module docstring within ``reach`` (m,
-    :func:`pass_reach`), each vertex and edge kept on the side it lay on at ``x0`` (the
-    last pass's positions): over the leaf patches that may touch (:func:`leaf_pairs` after
-    :func:`refit`, then :func:`close_pairs`), vertices against triangles, then edges
-    against edges. Returns the number of pairs it pushed apart."""
+def self_contacts(sc, inv_mass, p, x0, fit):
+    """One pass of the contacts of the module docstring, each vertex and edge kept on the
+    side it lay on at ``x0`` (the last pass's positions) and searched within its pair's
+    reach (:func:`pair_reach` of the moves since ``x0``): over the leaf patches that may
+    touch within the largest pair reach (:func:`leaf_pairs` after :func:`refit`, then
+    :func:`close_pairs`), vertices against triangles, then edges against edges. Returns
+    the number of pairs it pushed apart."""
     triangles, thickness, edges = sc.triangles, sc.thickness, sc.tree.leaf_edge
     if triangles.shape[0] == 0:
         return 0
+    moves = vertex_moves(p, x0, fit.moves)
+    largest = moves.max() if moves.shape[0] else 0.0
+    reach = pair_reach(largest, largest, thickness)
     refit(sc.tree, triangles, p, fit)
     pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_CONTACT, reach)
     vt, ee = close_pairs(sc, p, fit.box, pairs, found, reach)
@@ -674,11 +685,11 @@ def self_contacts(sc, inv_mass, p, x0, fit, reach):
     for q in range(vt.shape[0]):
         f = vt[q, 1]
         tri = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
-        pushed += push_vertex(p, x0, inv_mass, vt[q, 0], tri, thickness, reach) < 0.0
+        pushed += push_vertex(p, x0, inv_mass, vt[q, 0], tri, thickness, moves) < 0.0
     for q in range(ee.shape[0]):
         e, g = ee[q, 0], ee[q, 1]
         i, j, k, l = edges[e, 0], edges[e, 1], edges[g, 0], edges[g, 1]
-        pushed += push_edges(p, x0, inv_mass, i, j, k, l, thickness, reach) < 0.0
+        pushed += push_edges(p, x0, inv_mass, i, j, k, l, thickness, moves) < 0.0
     return pushed
 
 
@@ -693,11 +704,22 @@ def largest_move(p, q):
 
 
 @njit(cache=True)
-def pass_reach(moved, thickness):
-    """The search distance of a pass after the cloth moved at most ``moved`` since the last
-    one: REACH thickness, and at least 2 moved + thickness, so that a vertex or an edge that
-    crossed since then is found (module docstring)."""
-    return max(REACH * thickness, 2.0 * moved + thickness)
+def vertex_moves(p, q, out):
+    """``out`` filled with |p_i - q_i| (m), and returned."""
+    for i in range(p.shape[0]):
+        dx, dy, dz = p[i, 0] - q[i, 0], p[i, 1] - q[i, 1], p[i, 2] - q[i, 2]
+        out[i] = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return out
+
+
+@njit(cache=True)
+def pair_reach(moved_1, moved_2, thickness):
+    """The search distance of a pair (a vertex and a triangle, or two edges) whose parts
+    moved at most ``moved_1`` and ``moved_2`` since the last pass: REACH thickness, and at
+    least moved_1 + moved_2 + thickness, so that a pair that crossed since then is found
+    (module docstring). The closest point of a triangle or an edge, at fixed barycentric
+    weights, moves at most as far as its farthest corner."""
+    return max(REACH * thickness, moved_1 + moved_2 + thickness)
 
 
 @njit(cache=True)
@@ -705,7 +727,7 @@ def pass_due(p, xp, anchor, thickness, last):
     """Whether :func:`self_contact_substep` must run the pass now: in the frame's ``last``
     substep, or when the cloth may have moved so far since the pass at ``anchor`` that a
     crossing would leave the base reach (REACH thickness) before the next substep: a later
-    pass still finds it (:func:`pass_reach`), but the sooner a crossing is undone, the
+    pass still finds it (:func:`pair_reach`), but the sooner a crossing is undone, the
     smaller the push. Two points moving at most d each since the pass are at most 2 d
     closer; the pass runs when 2 (d + d_h) would exceed (REACH - 1) thickness,
     d = max_i |p_i - anchor_i|, d_h = max_i |p_i - xp_i| (this substep's move, the
@@ -732,8 +754,7 @@ def self_contact_substep(sc, inv_mass, p, xp, fit, last):
     if pass_due(p, xp, fit.anchor, sc.thickness, last):
         for _ in range(PASS_SWEEPS):
             fit.passes[0] += 1
-            reach = pass_reach(largest_move(p, fit.anchor), sc.thickness)
-            if self_contacts(sc, inv_mass, p, fit.anchor, fit, reach) == 0:
+            if self_contacts(sc, inv_mass, p, fit.anchor, fit) == 0:
                 break
         copy_rows(fit.anchor, p, p.shape[0])
 

@@ -74,7 +74,6 @@ from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.self_contact import (
     SelfContact,
     TreeFit,
-    pass_reach,
     self_contact_model,
     self_contact_substep,
     self_contacts,
@@ -728,9 +727,8 @@ class XPBDCloth:
         fit = self.workspace.fit
         if fit is not None:
             start = time.perf_counter()
-            sc = self.tables.self_contact
-            reach = pass_reach(0.0, sc.thickness)
-            self_contacts(sc, self.tables.constraints.inv_mass, p, x, fit, reach)
+            inv_mass = self.tables.constraints.inv_mass
+            self_contacts(self.tables.self_contact, inv_mass, p, x, fit)
             held += (time.perf_counter() - start) * int(fit.passes[0])
         self._contact_timing = (calls + 1, held)
         return held
