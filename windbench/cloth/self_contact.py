@@ -676,7 +676,7 @@ def self_contacts(sc, inv_mass, p, x0, fit):
     if triangles.shape[0] == 0:
         return 0
     moves = vertex_moves(p, x0, fit.moves)
-    largest = moves.max() if moves.shape[0] else 0.0
+    largest = moves.max()  # there are triangles, so vertices
     reach = pair_reach(largest, largest, thickness)
     refit(sc.tree, triangles, p, fit)
     pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_CONTACT, reach)
