@@ -2,6 +2,7 @@
 and cost (windbench/wind/particles/mixing.py).
 
     PYTHONPATH=$PWD python experiments/lee_mixing.py RUNS... --reference REF... [--out CSV]
+        [--vary KEY]
     PYTHONPATH=$PWD python experiments/lee_mixing.py --cost [--steps N]
 
 The first form reads the particle runs under RUNS (e.g. multirun/fence,
@@ -17,7 +18,9 @@ wake lattice (2-15 H behind, 0.25-1 H high: the lee box of ``lee_error`` lies wi
 first 5 H, in the reference's recirculation); the median wind time per step and its ratio
 to the paper lee's. Each scene's reference gets a row of its own (lee model
 ``reference``) with its wake, its levels (resolutions), the lee difference of its two
-finest levels, the order used and its GCI (:mod:`windbench.report.lee`).
+finest levels, the order used and its GCI (:mod:`windbench.report.lee`). ``--vary KEY``
+(e.g. ``wind.recirculation_backflow``) adds a column with each run's value of a key its
+sweep varied, and that override to the command.
 
 The second form times both lee models in one process, alternating them over the same
 steps (the fence at 64 cells, dt 0.05 s; two_flags_wall at 40 cells, dt 0.02 s, with the
@@ -68,12 +71,15 @@ def behind_flux(rec) -> float:
     return float(ratio[grid.axes()[0] > max(rears)].min()) if rears else np.nan
 
 
-def run_command(rec, lee_model: str) -> str:
-    """The single-run command that repeats ``rec`` (its experiment and settings)."""
+def run_command(rec, lee_model: str, vary: str | None = None) -> str:
+    """The single-run command that repeats ``rec`` (its experiment and settings, and the
+    varied key's value)."""
     s = rec.settings
+    extra = f" {vary}={rec.config.get(vary)}" if vary else ""
     return (
         f"windbench experiment={rec.experiment} wind=particles wind.lee_model={lee_model} "
         f"scene={s['scene']} grid.resolution={s['resolution']} sim.dt={s['dt']} seed={s['seed']}"
+        + extra
     )
 
 
@@ -117,7 +123,7 @@ def reference_rows(refs) -> list[dict]:
     ]
 
 
-def run_rows(runs, references) -> pd.DataFrame:
+def run_rows(runs, references, vary: str | None = None) -> pd.DataFrame:
     """One row per complete particle run (module docstring)."""
     records = read_runs(find_runs(runs), progress=False)
     refs = choose_references(records, read_runs(find_runs(references), progress=False))
@@ -128,7 +134,9 @@ def run_rows(runs, references) -> pd.DataFrame:
             continue
         row = {k: rec.settings[k] for k in SETTINGS}
         row["lee_model"] = rec.config.get("wind.lee_model") or "paper"
-        row["command"] = run_command(rec, row["lee_model"])
+        if vary:
+            row[vary] = rec.config.get(vary)
+        row["command"] = run_command(rec, row["lee_model"], vary)
         row["lee_error"] = rec.figures.get("lee_error")
         row["flux_behind_min"] = behind_flux(rec)
         row["wind_seconds_median"] = rec.figures.get("wind_seconds_median")
@@ -140,7 +148,7 @@ def run_rows(runs, references) -> pd.DataFrame:
         row["code"] = rec.code
         rows.append(row)
     rows += reference_rows(refs)
-    df = pd.DataFrame(rows).sort_values([*SETTINGS, "lee_model"])
+    df = pd.DataFrame(rows).sort_values([*SETTINGS, "lee_model", *([vary] if vary else [])])
     paper = df[df["lee_model"] == "paper"].set_index(SETTINGS)
     for col in ("lee_error", "wake_error", "wind_seconds_median"):
         base = paper[col].reindex(df.set_index(SETTINGS).index).to_numpy()
@@ -200,12 +208,13 @@ def main(argv=None) -> None:
     ap.add_argument("--cost", action="store_true")
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--out", type=Path, help="the table to write (default: by the form)")
+    ap.add_argument("--vary", help="a key the runs' sweep varied: a column of its values")
     args = ap.parse_args(argv)
     RESULTS.mkdir(exist_ok=True)
     if args.cost:
         df, out = cost_rows(args.steps), RESULTS / "lee_mixing_cost.csv"
     else:
-        df, out = run_rows(args.runs, args.reference), RESULTS / "lee_mixing.csv"
+        df, out = run_rows(args.runs, args.reference, args.vary), RESULTS / "lee_mixing.csv"
     out = args.out or out
     df.to_csv(out, index=False, float_format="%.6g")
     print(df.to_string(index=False))

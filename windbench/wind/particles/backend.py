@@ -130,7 +130,7 @@ class ParticleConfig(WindConfig):
         MIXING_LENGTH_LIMIT, "m", "mixing lee: Blackadar's lambda of the eddy diffusivity", gt=0
     )
     recirculation_backflow: float = setting(
-        0.3,
+        0.4,
         "1",
         "mixing lee: the wake eddy's backflow at the floor over the wind at the box's top",
         ge=0,

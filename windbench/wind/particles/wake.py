@@ -10,24 +10,24 @@ its length after Fackrell (1984, J. Wind Eng. Ind. Aerodyn. 16, 97),
 
     L_R / H = 1.8 (W / H) / ((L / H)^0.3 (1 + 0.24 W / H))   (2-D limit: 7.5 (L/H)^-0.3),
 
-W taken twice across a wall or periodic face it touches, unbounded if it touches both.
-The cavity is kappa H tall (``wind.recirculation_height``, Roeckle's kappa = 1 by
-default). The outer flow goes around the cavity as around a body (a particle that ends a
-step in it is mirrored out across its nearest edge, top or side, never along the wind, so
-its flux passes around) and the cells add to their wind the closed eddy of the stream
-function (xi = s / L_R, h(xi) = kappa H sqrt(1 - xi^2), U_H the sources' undisturbed speed
-at the obstacle's top, beta its backflow ratio, m ``wind.recirculation_exponent``)
+W taken twice across a wall or periodic face it touches, unbounded if it touches both; the
+cavity is kappa H tall (``wind.recirculation_height``, Röckle's kappa = 1 by default). The
+outer flow goes around the cavity as around a body (a particle that ends a step in it is
+mirrored out across its nearest edge, top or side, never along the wind, so its flux
+passes around) and the cells add the closed eddy of the stream function (xi = s / L_R,
+h(xi) = kappa H sqrt(1 - xi^2), U_H the sources' undisturbed speed at the obstacle's top,
+beta its backflow ratio, m ``wind.recirculation_exponent``)
 
     psi = -beta U_H z P(xi) (1 - (z/h)^m)^2,   P = (27/4) xi (1 - xi)^2,
     u_s = d psi/dz = -beta U_H P (1 - (z/h)^m)(1 - (2m + 1)(z/h)^m),   w = -d psi/ds:
 
 divergence-free, no net flux through any plane across the wind (psi = 0 on the floor, the
 lee face and the cavity's edge), backflow beta U_H at the floor a third of the way along,
-up to z = (2m + 1)^(-1/m) h (m = 2: h / sqrt(5)), and a forward return flow above it.
-Separated flows behind fences and steps reach backflows of about 0.2-0.3 of the outer
-speed (Eaton and Johnston 1981, AIAA J. 19, 1093; Castro and Fackrell 1978, J. Ind.
-Aerodyn. 3, 1). A larger m confines the return flow to the cavity's top, where the shear
-layer is; with kappa, it sets how tall the backflow stands.
+up to z = (2m + 1)^(-1/m) h (m = 2: h / sqrt(5)), a forward return flow above it. Behind
+fences backflows reach 0.2-0.3 of the outer speed (Castro and Fackrell 1978, J. Ind.
+Aerodyn. 3, 1), in the second-order Navier-Stokes references here 0.44 (wall) and 0.53
+(fence) at 0.3 m. beta = 0.4 (``wind.recirculation_backflow``) is fitted to them: of
+0.2-0.5 it gives both the smallest lee error (``experiments/results/lee_mixing_backflow.csv``).
 
 The shear layer that leaves the obstacle's top mixes the wake: a free shear flow has an
 eddy viscosity of about c U_s delta, c ~ 0.01-0.07 (Pope 2000, Turbulent Flows, §5.4-5.5),
@@ -35,9 +35,9 @@ with U_s ~ U_H and delta ~ H here, so the walk's K gains
 
     K_w = c U_H H G(s / L_R) Z(z) Y(n),   G(x) = x e^(1 - x) (x > 0),
 
-largest at reattachment and decaying downstream; Z = 1 below H and exp(-((z - H)/H)^2)
-above; Y = 1 across the obstacle's width (n across the wind), exp(-(d/H)^2) at a distance
-d beyond it. The walk's drift takes grad K_w, so the well-mixed condition still holds.
+largest at reattachment, decaying downstream; Z = 1 below H and exp(-((z - H)/H)^2) above;
+Y = 1 across the obstacle's width (n across the wind), exp(-(d/H)^2) at a distance d beyond
+it. The walk's drift takes grad K_w, so the well-mixed condition still holds.
 """
 
 from __future__ import annotations
