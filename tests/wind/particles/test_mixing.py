@@ -205,9 +205,10 @@ def test_the_volume_flux_through_every_plane_behind_a_wall_is_the_inflows():
 
 
 def test_the_fence_shadow_is_shallow_near_the_fence_and_fills_in_downstream(run_config):
-    """The issue's check: ``windbench wind=particles wind.lee_model=mixing scene=fence
-    grid.resolution=64`` keeps >= 90 % of the flux through every plane behind the fence;
-    at half the fence height u/u0 is <= 0.5 at 2 H and >= 0.4 at 10 H (steady window)."""
+    """The mixing lee's acceptance check: ``windbench wind=particles wind.lee_model=mixing
+    scene=fence grid.resolution=64`` keeps >= 90 % of the flux through every plane behind
+    the fence; at half the fence height u/u0 is <= 0.5 at 2 H and >= 0.4 at 10 H (steady
+    window)."""
     overrides = ["wind=particles", MIXING, "scene=fence", "grid.resolution=64"]
     _, ds = run_config([*overrides, "sim.spinup=auto", "output.snapshots=8"])
     assert ds.attrs["status"] == "complete"
