@@ -6,8 +6,9 @@
   (``mixing_length``; Hoerner: 1.17 for a free plate);
 - ``two_flags_wall``: the scene at 32 and 64 cells in a developed flow (the scene's automatic
   spin-up, two flow-through times, then 4 s recorded) at dt 1/60 and 0.01, ``paper`` and
-  ``projection`` coupling: whether it completes, each flag's mean |F| over the recorded
-  steps and the sheltered-to-exposed force ratio.
+  ``projection`` coupling and ``none`` (one-way: the §3 law in the wake the wall alone
+  makes): whether it completes, each flag's mean |F| over the recorded steps and the
+  sheltered-to-exposed force ratio.
 
     PYTHONPATH=$PWD python experiments/projection_coupling.py [--flags-only] [--out F]
         [key=value ...]
@@ -126,7 +127,7 @@ def main() -> None:
         flags(c, dt, n, args.overrides)
         for n in (32, 64)
         for dt in (1.0 / 60.0, 0.01)
-        for c in ("paper", "projection")
+        for c in ("paper", "projection", "none")
     ]
     keys = []
     for row in rows:
