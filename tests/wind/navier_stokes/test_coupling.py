@@ -134,8 +134,10 @@ def test_the_sheltered_flag_coupled_through_pressure_feels_the_walls_lee(tmp_pat
     force on the exposed one over the last 1.5 s (the paper's coupling: 0.03). With the
     paper's removal of the normal velocity in the cut cells applied as well as the closed
     faces, the removal's changing set of cells made the pressure loads noisy and the ratio
-    was 0.77. In the scene's own log-law wind the ratio is 0.82 (the paper's coupling:
-    0.08): the pressure loads do not yet show that lee."""
+    was 0.77. In the scene's own log-law wind, developed flow, the ratio is 0.58-0.67 at
+    32 cells and 0.18-0.37 at 64 against 0.05-0.08 with one-way coupling
+    (``experiments/results/projection_coupling.csv``): the pressure loads show only part
+    of that lee."""
     cfg = compose_config(
         [
             "wind=navier_stokes",

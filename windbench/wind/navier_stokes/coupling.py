@@ -22,10 +22,12 @@
   solvable. The paper's removal is not applied as well: it stopped the air on every face
   next to a cut cell, a cell's width around the cloth, whose set changes as the cloth
   moves, and the projection turned each change into a pressure impulse on the cloth
-  (two_flags_wall at 32 cells, developed flow, dt 1/60 and 0.01: the sheltered flag
-  felt 0.72 and 0.68 of the exposed flag's force with both at 1bb48eb, 0.15 and 0.12 with
-  the closed faces alone; the paper's coupling 0.02 and 0.19;
-  experiments/projection_coupling.py).
+  (two_flags_wall in a uniform 6 m/s at 32 cells, developed flow, dt 1/60 and 0.01: the
+  sheltered flag felt 0.72 and 0.68 of the exposed flag's force with both, 0.15 and 0.12
+  with the closed faces alone; the paper's coupling 0.02 and 0.19). In the scene's log-law
+  wind the closed faces give 0.18-0.67, the paper's coupling 0.007-0.04 and one-way
+  coupling, the §3 law in the wall's own wake, 0.05-0.08
+  (``experiments/results/projection_coupling.csv``).
 - ``none``: the cloth does not act on the air (one-way coupling).
 """
 
