@@ -30,8 +30,9 @@ from windbench.wind.particles.wake import (
     wake_rows,
 )
 
-BACKFLOW, MIXING = 0.3, 0.05
-EDDY = Eddy(BACKFLOW, MIXING, 2.0, 1.0)  # the defaults of the wake's shape
+DEFAULTS = compose_config(["wind=particles"]).wind
+BACKFLOW, MIXING = DEFAULTS.recirculation_backflow, DEFAULTS.wake_mixing
+EDDY = Eddy(BACKFLOW, MIXING, DEFAULTS.recirculation_exponent, DEFAULTS.recirculation_height)
 WALL = {"type": "box", "min": [2.0, 0.0, 0.0], "max": [2.5, 2.0, 1.5]}  # across the channel
 
 

@@ -26,8 +26,8 @@ lee face and the cavity's edge), backflow beta U_H at the floor a third of the w
 up to z = (2m + 1)^(-1/m) h (m = 2: h / sqrt(5)), a forward return flow above it. Behind
 fences backflows reach 0.2-0.3 of the outer speed (Castro and Fackrell 1978, J. Ind.
 Aerodyn. 3, 1), in the second-order Navier-Stokes references here 0.44 (wall) and 0.53
-(fence) at 0.3 m. beta = 0.4 (``wind.recirculation_backflow``) is fitted to them: of
-0.2-0.5 it gives both the smallest lee error (``experiments/results/lee_mixing_backflow.csv``).
+(fence) at 0.3 m. beta = 0.4 (``wind.recirculation_backflow``) is fitted to them, the least
+lee error against each of 0.2-0.5 (``experiments/results/lee_mixing_backflow.csv``).
 
 The shear layer that leaves the obstacle's top mixes the wake: a free shear flow has an
 eddy viscosity of about c U_s delta, c ~ 0.01-0.07 (Pope 2000, Turbulent Flows, §5.4-5.5),
