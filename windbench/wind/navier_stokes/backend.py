@@ -706,6 +706,7 @@ class NavierStokesWind(WindField):
             np.ascontiguousarray(obstacles.cloth_triangles, dtype=np.int64),
             self.psi,
             self.solid,
+            tuple(self.free),
             self.lower,
             self.h,
             self.h / dt,

@@ -7,27 +7,28 @@
   u <- u - ((u - v_cloth) . n) n, "prior to any other operation" of the solver step.
   The cloth's own velocity is kept (the paper's Neumann condition u . n = 0 for a cloth
   at rest, generalised to a moving one).
-- ``projection``: instead, every grid face whose centre-to-centre segment crosses a
-  cloth triangle (:func:`windbench.geometry.raster.segment_triangle`) is a face of the
-  cloth in the pressure projection: its velocity starts at the cloth's normal velocity
-  ((v . n) n_a) and yields to the pressure jump as the cloth's mass per area lets it
+- ``projection``: instead, every grid face whose centre-to-centre segment crosses a cloth
+  triangle (:func:`windbench.geometry.raster.segment_triangle`) is a face of the cloth in
+  the pressure projection: its velocity starts at the cloth's normal velocity ((v . n)
+  n_a) and yields to the pressure jump as the cloth's mass per area lets it
   (:func:`move_membranes`; pinned or static cloth is an impermeable wall), so that air
   cannot pass through the flag and the solve holds the air's reaction to the cloth's
   motion within the step. The air acts back on the cloth through the projection's own
-  pressure: each triangle carries the jump ``(p_- - p_+) A n`` across it
-  (:func:`triangle_pressure_loads`). Air enclosed by walls of cloth (a pocket:
-  :func:`pockets`) keeps its volume only if their velocities add up to zero around it,
-  which faceted motion does not guarantee: the projection's right-hand side loses its
-  mean over each pocket (:func:`balance_pockets`), so that the Poisson problem stays
-  solvable. The paper's removal is not applied as well: it stopped the air on every face
-  next to a cut cell, a cell's width around the cloth, whose set changes as the cloth
-  moves, and the projection turned each change into a pressure impulse on the cloth
-  (two_flags_wall in a uniform 6 m/s at 32 cells, developed flow, dt 1/60 and 0.01: the
-  sheltered flag felt 0.72 and 0.68 of the exposed flag's force with both, 0.15 and 0.12
-  with the closed faces alone; the paper's coupling 0.02 and 0.19). In the scene's log-law
-  wind the closed faces give 0.18-0.67, the paper's coupling 0.007-0.04 and one-way
-  coupling, the §3 law in the wall's own wake, 0.05-0.08
-  (``experiments/results/projection_coupling.csv``).
+  pressure: each triangle carries the jump ``(p_- - p_+) A n`` across it, each side's
+  pressure extrapolated to the sheet (:func:`triangle_pressure_loads`). Air enclosed by
+  walls of cloth (a pocket: :func:`pockets`) keeps its volume only if their velocities add
+  up to zero around it, which faceted motion does not guarantee: the projection's
+  right-hand side loses its mean over each pocket (:func:`balance_pockets`), so that the
+  Poisson problem stays solvable. The paper's removal is not applied as well: it stopped
+  the air on every face next to a cut cell, a cell's width around the cloth, whose set
+  changes as the cloth moves, and the projection turned each change into a pressure
+  impulse on the cloth (two_flags_wall in a uniform 6 m/s at 32 cells, developed flow, dt
+  1/60 and 0.01: the sheltered flag felt 0.72 and 0.68 of the exposed flag's force with
+  both, 0.15 and 0.12 with the closed faces alone; the paper's coupling 0.02 and 0.19). In
+  the scene's log-law wind, 32 and 64 cells, the closed faces give 0.34-0.50 and 0.08-0.17
+  (0.58-0.67 and 0.18-0.37 with the loads read from the two cells beside the sheet), the
+  paper's coupling 0.03-0.04 and 0.007-0.008, one-way coupling, the §3 law in the wall's
+  own wake, 0.05 and 0.08 (``experiments/results/projection_coupling.csv``).
 - ``none``: the cloth does not act on the air (one-way coupling).
 """
 
@@ -285,36 +286,76 @@ def balance_pockets(rhs, label, count):
 
 
 @njit(cache=True)
-def _straddling_cells(x, a, lower, h, shape):
-    """Flat indices of the two cells whose centres straddle point x along axis a (the cells
-    of x on the other axes), -1 for one outside the grid."""
-    cells = np.full(2, -1, dtype=np.int64)
+def _straddling_cell(x, a, lower, h):
+    """(index, theta): the cell whose centre and the next one's along axis a straddle point
+    x (the cells of x on the other axes), and where x lies between the two centres (0 at
+    the lower, 1 at the upper)."""
     index = np.empty(3, dtype=np.int64)
+    theta = 0.0
     for b in range(3):
-        index[b] = int(np.floor((x[b] - lower[b]) / h - (0.5 if b == a else 0.0)))
-    for side in range(2):
-        c, inside = 0, True
-        for b in range(3):
-            i = index[b] + (side if b == a else 0)
-            inside = inside and 0 <= i < shape[b]
-            c = c * shape[b] + i
-        if inside:
-            cells[side] = c
-    return cells
+        f = (x[b] - lower[b]) / h - (0.5 if b == a else 0.0)
+        index[b] = int(np.floor(f))
+        if b == a:
+            theta = f - index[b]
+    return index, theta
 
 
 @njit(cache=True)
-def triangle_pressure_loads(positions, triangles, psi, solid, lower, h, scale):
+def _air_psi(psi, solid, index, a, offset):
+    """(whether it is air, psi) of the cell ``offset`` cells from ``index`` along axis a:
+    not air outside the grid or in a solid cell."""
+    i, j, k = index[0], index[1], index[2]
+    if a == 0:
+        i += offset
+    elif a == 1:
+        j += offset
+    else:
+        k += offset
+    n0, n1, n2 = psi.shape
+    if i < 0 or j < 0 or k < 0 or i >= n0 or j >= n1 or k >= n2 or solid[i, j, k]:
+        return False, 0.0
+    return True, psi[i, j, k]
+
+
+@njit(cache=True)
+def _face_open(free, index, a, offset):
+    """Whether the face between the cells ``offset`` and ``offset + 1`` from ``index`` along
+    axis a is open (its padded index along a is that of the upper cell plus one)."""
+    I, J, K = index[0] + 1, index[1] + 1, index[2] + 1
+    if a == 0:
+        return free[0][I + offset + 1, J, K] != 0
+    if a == 1:
+        return free[1][I, J + offset + 1, K] != 0
+    return free[2][I, J, K + offset + 1] != 0
+
+
+@njit(cache=True)
+def _side_pressure(psi, solid, free, index, a, near, far, reach):
+    """psi on one side of a sheet, at the sheet: the ``near`` cell's, extrapolated linearly
+    over ``reach`` cells toward the sheet from the ``far`` cell beyond it, where that is air
+    behind an open face (else the near cell's alone); NaN if the near cell is not air."""
+    inside, p = _air_psi(psi, solid, index, a, near)
+    if not inside:
+        return np.nan
+    there, q = _air_psi(psi, solid, index, a, far)
+    if there and _face_open(free, index, a, min(near, far)):
+        return p + reach * (p - q)
+    return p
+
+
+@njit(cache=True)
+def triangle_pressure_loads(positions, triangles, psi, solid, free, lower, h, scale):
     """Pressure force over rho on each triangle, ``(p_- - p_+) / rho A n``: n its unit
-    normal, A its area, p_-, p_+ the pressures behind and before it, read in the two cells
-    whose centres straddle its centroid along the axis a where |n_a| is largest: the cells
-    either side of the grid face it closes there (:func:`blocked_faces`);
-    p / rho = ``scale`` psi. A side outside the grid or in a solid cell counts as the
-    other side (no jump)."""
+    normal, A its area, p_-, p_+ the pressures behind and before it, along the axis a where
+    |n_a| is largest, at its centroid: each side's from the two cells on that side, the
+    nearer extrapolated linearly to the centroid from the farther (second order: a pressure
+    gradient that runs through the sheet, e.g. across a wake or a hydrostatic one, puts no
+    force on a sheet of no thickness, where the two cells next to it alone would give it
+    that gradient times their distance h). A side whose farther cell is not air or lies
+    behind a closed face (a wall, a body, the cloth again) keeps its nearer cell's value;
+    a side outside the grid or in a solid cell counts as the other side (no jump).
+    p / rho = ``scale`` psi; ``free``: the padded open-face masks of the three axes."""
     out = np.zeros((triangles.shape[0], 3))
-    shape = psi.shape
-    flat = psi.reshape(-1)
-    body = solid.reshape(-1)
     for t in range(triangles.shape[0]):
         a = positions[triangles[t, 0]]
         b = positions[triangles[t, 1]]
@@ -323,15 +364,13 @@ def triangle_pressure_loads(positions, triangles, psi, solid, lower, h, scale):
         if (n * n).sum() == 0.0:
             continue
         axis = int(np.argmax(np.abs(n)))
-        low, high = _straddling_cells((a + b + c) / 3.0, axis, lower, h, shape)
+        index, theta = _straddling_cell((a + b + c) / 3.0, axis, lower, h)
+        low = _side_pressure(psi, solid, free, index, axis, 0, -1, theta)
+        high = _side_pressure(psi, solid, free, index, axis, 1, 2, 1.0 - theta)
+        if np.isnan(low) or np.isnan(high):
+            continue  # a side outside the grid or in a body: no jump
         behind, before = (low, high) if n[axis] > 0.0 else (high, low)
-        if behind < 0 or body[behind]:
-            behind = before
-        if before < 0 or body[before]:
-            before = behind
-        if behind < 0 or before < 0:
-            continue
-        jump = 0.5 * scale * (flat[behind] - flat[before])  # n has length 2 A
+        jump = 0.5 * scale * (behind - before)  # n has length 2 A
         for k in range(3):
             out[t, k] = jump * n[k]
     return out
