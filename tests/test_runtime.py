@@ -49,7 +49,8 @@ def test_a_run_uses_its_thread_budget_and_records_cpu_time_and_load(run_config):
 
 
 def _fresh_python(code: str, **env) -> str:
-    base = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", *env)}
+    unset = ("OMP_WAIT_POLICY", "NUMBA_CACHE_DIR", *env)  # as a user's shell has them
+    base = {k: v for k, v in os.environ.items() if k not in unset}
     proc = subprocess.run(
         [sys.executable, "-c", code],
         capture_output=True,
@@ -67,12 +68,72 @@ def test_importing_windbench_makes_openmp_wait_passively():
     assert _fresh_python(code, OMP_WAIT_POLICY="active") == "active"  # the user's choice
 
 
-def test_a_read_only_install_caches_kernels_in_the_user_cache(monkeypatch, tmp_path):
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+def _package(folder: Path, callee_value: int) -> Path:
+    """A package whose cached kernel ``a.f`` calls ``b.g`` (another module), g = value."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "__init__.py").write_text("")
+    (folder / "a.py").write_text(
+        "from numba import njit\nfrom .b import g\n\n\n"
+        "@njit(cache=True)\ndef f():\n    return g() + 1\n"
+    )
+    (folder / "b.py").write_text(
+        f"from numba import njit\n\n\n@njit\ndef g():\n    return {callee_value}\n"
+    )
+    return folder
+
+
+def _cached_f(package: Path, cache: Path) -> str:
+    """f() of ``package`` in a new process whose numba caches in ``cache``."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(package.parent)}
+    code = f"from {package.name}.a import f; print(f())"
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    return proc.stdout.strip()
+
+
+def test_a_changed_callee_in_another_module_is_not_read_from_a_stale_cache(tmp_path):
+    """numba checks a cached kernel against its own file only: with one cache folder, f
+    keeps g's old value after b.py changes; with the folder of the sources' fingerprint
+    (:func:`windbench.numba_cache_dir`) it compiles again and sees the new one."""
+    package = _package(tmp_path / "pkg", 1)
+    fixed = tmp_path / "one_cache"
+    assert (
+        _cached_f(package, fixed) == "2" == _cached_f(package, windbench.numba_cache_dir(package))
+    )
+    _package(package, 41)  # b.py changes, a.py does not
+    assert _cached_f(package, fixed) == "2"  # numba's stale kernel
+    assert _cached_f(package, windbench.numba_cache_dir(package)) == "42"
+
+
+def test_the_cache_folder_follows_the_sources_and_a_read_only_install(monkeypatch, tmp_path):
+    package = _package(tmp_path / "pkg", 1)
+    first = windbench.numba_cache_dir(package)
+    assert first.parent == package / ".numba_cache"
+    (package / "notes.txt").write_text("not a source")
+    (package / "__pycache__").mkdir()
+    (package / "__pycache__" / "stale.py").write_text("x = 1")
+    assert windbench.numba_cache_dir(package) == first
+    (package / "b.py").write_text((package / "b.py").read_text() + "# a change\n")
+    assert windbench.numba_cache_dir(package) != first
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "home"))
     monkeypatch.setattr(os, "access", lambda path, mode: False)
-    assert windbench.numba_cache_dir(tmp_path / "pkg") == tmp_path / "windbench" / "numba"
-    monkeypatch.setattr(os, "access", lambda path, mode: True)
-    assert windbench.numba_cache_dir(tmp_path / "pkg") is None  # numba's own __pycache__
+    assert windbench.numba_cache_dir(package).parent == tmp_path / "home" / "windbench" / "numba"
+
+
+def test_old_versions_of_the_cache_are_pruned(tmp_path):
+    base = tmp_path / "cache"
+    for n in range(6):
+        (base / f"v{n}").mkdir(parents=True)
+        os.utime(base / f"v{n}", (n, n))  # v5 the most recently used
+    windbench.prune_cache(base / "v0")  # in use again: kept, with the three newest others
+    assert sorted(p.name for p in base.iterdir()) == ["v0", "v3", "v4", "v5"]
+
+
+def test_importing_windbench_sets_the_cache_folder_unless_the_user_has():
+    code = "import os, windbench; print(os.environ['NUMBA_CACHE_DIR'])"
+    assert _fresh_python(code) == str(windbench.numba_cache_dir())
+    assert _fresh_python(code, NUMBA_CACHE_DIR="/tmp/mine") == "/tmp/mine"
 
 
 class Clock:
