@@ -60,7 +60,8 @@ def test_static_square_plate_has_a_plate_drag_coefficient():
 
 def _field_and_sheet(axis, offset):
     """A 6^3 grid of 0.5 m cells (no solid, every face open) and one triangle normal to
-    ``axis`` (tilted 0.3 off it) whose centroid lies ``offset`` m past the centre 1.25 m."""
+    ``axis`` (tilted 6 degrees off it) whose centroid lies ``offset`` m past the centre
+    1.25 m."""
     shape, h = (6, 6, 6), 0.5
     solid = np.zeros(shape, dtype=np.bool_)
     free = tuple(
