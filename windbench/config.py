@@ -43,10 +43,14 @@ def setting(
     ge: float | None = None,
     le: float | None = None,
     choices: tuple[str, ...] | None = None,
+    when: tuple[str, str] | None = None,
 ) -> Any:
     """A schema field with its unit (UDUNITS, ``1`` for a count or ratio, ``""`` for none),
-    a one-line meaning and the values allowed (checked by :func:`check_values`)."""
+    a one-line meaning and the values allowed (checked by :func:`check_values`); ``when``
+    = (sibling key, value): the field is read only when that key has that value (the
+    report does not count it as swept among runs that do not read it)."""
     meta = {"units": units, "doc": doc, "gt": gt, "ge": ge, "le": le, "choices": choices}
+    meta["when"] = when
     if isinstance(default, list | dict):
         return field(default_factory=lambda: type(default)(default), metadata=meta)
     return field(default=default, metadata=meta)

@@ -235,6 +235,26 @@ def test_tagging_gives_the_superposed_wind_on_reached_cells_only():
     )
 
 
+def test_a_mixing_lee_key_is_no_dimension_of_runs_that_do_not_read_it():
+    """wind.recirculation_backflow is read by the mixing lee only: paper-lee runs made with
+    another default add no dimension; two mixing runs that differ in it do."""
+
+    def rec(lee, backflow, seed):
+        cfg = {"wind.lee_model": lee, "wind.recirculation_backflow": backflow}
+        r = RunRecord(Path(f"/r/{lee}{backflow}{seed}"), "complete", config=cfg)
+        r.settings = {"wind": "particles", "scene": "fence", "resolution": 16, "dt": 0.1}
+        r.settings["seed"] = seed
+        return r
+
+    ns = RunRecord(Path("/r/ns"), "complete", config={})
+    ns.settings = {"wind": "navier_stokes", "scene": "fence", "resolution": 16, "dt": 0.1}
+    ns.settings["seed"] = 0
+    runs = [rec("paper", 0.3, 0), rec("mixing", 0.4, 0), ns]
+    assert "wind.recirculation_backflow" not in swept_keys(runs)
+    assert "wind.lee_model" in swept_keys(runs)
+    assert "wind.recirculation_backflow" in swept_keys([*runs, rec("mixing", 0.3, 1)])
+
+
 def test_swept_keys_are_the_settings_plus_config_keys_that_vary():
     def rec(lift, domain, res):
         cfg = {"aero.lift_coefficient": lift, "scene.domain.max": domain, "grid.resolution": res}

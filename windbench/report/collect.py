@@ -34,6 +34,8 @@ cores is ``contended`` (:func:`contention`); the cost fits leave it out.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 import re
 from collections.abc import Iterable, Sequence
@@ -47,8 +49,9 @@ from omegaconf import OmegaConf
 
 from windbench.config import schema_fields
 from windbench.dataset import CONVENTIONS, VARIABLES, code_version, verify
-from windbench.errors import DatasetUnreadable
+from windbench.errors import ConfigError, DatasetUnreadable
 from windbench.metrics import unsettled_reason
+from windbench.wind.registry import get_backend
 
 RUN_FILE = "windbench.nc"
 STATUS_FILE = "run_status.yaml"  # windbench.sweep.STATUS_FILE
@@ -530,7 +533,8 @@ def swept_keys(records: Sequence[RunRecord]) -> list[str]:
     """The dimensions: :data:`SETTINGS`, then every other config key that all complete runs
     have and that takes more than one value among them (e.g. ``aero.lift_coefficient``).
     A ``wind.*`` key of one backend (e.g. the particles' ``wind.lee_model``) counts when it
-    takes more than one value among the runs that have it. A ``scene.*`` key counts only
+    takes more than one value among the runs that read it (:func:`_reads`: a mixing-lee
+    key is no dimension of paper-lee runs made before its default changed). A ``scene.*`` key counts only
     if it varies among runs of one scene (e.g. a swept ``scene.cloths.0.resolution``):
     otherwise it follows from the scene's name. A ``cloth.*`` key counts only if it varies
     among the runs whose scene has cloth: a scene without cloth has no use for it."""
@@ -542,7 +546,7 @@ def swept_keys(records: Sequence[RunRecord]) -> list[str]:
             common &= set(r.config)
         backend_keys = {k for r in complete for k in r.config if k.startswith("wind.")} - common
         for key in sorted(backend_keys):
-            if len({repr(r.config[key]) for r in complete if key in r.config}) > 1:
+            if len({repr(r.config[key]) for r in complete if _reads(r, key)}) > 1:
                 extra.append(key)
         for key in sorted(common):
             if key in SETTINGS.values() or key in IGNORED:
@@ -557,6 +561,27 @@ def swept_keys(records: Sequence[RunRecord]) -> list[str]:
             if len({repr(r.config[key]) for r in runs}) > 1:
                 extra.append(key)
     return list(SETTINGS) + extra
+
+
+def _reads(record: RunRecord, key: str) -> bool:
+    """Whether the run has the ``wind.*`` key and its backend reads it: not where the key's
+    schema field is read only when a sibling key has a value (``when`` of
+    :func:`windbench.config.setting`) that the run's has not."""
+    if key not in record.config:
+        return False
+    when = _read_when(str(record.settings.get("wind")), key.removeprefix("wind."))
+    return when is None or record.config.get(f"wind.{when[0]}") == when[1]
+
+
+@functools.cache
+def _read_when(backend: str, name: str) -> tuple[str, str] | None:
+    """The ``when`` of field ``name`` in ``backend``'s config schema (None: always read)."""
+    try:
+        schema = get_backend(backend).config
+    except ConfigError:  # a backend not installed here: every key counts
+        return None
+    fields = {f.name: f for f in dataclasses.fields(schema)}
+    return fields[name].metadata.get("when") if name in fields else None
 
 
 def _has_cloth(record: RunRecord) -> bool:

@@ -87,6 +87,7 @@ PREFETCH_DENSITY = 0.5  # particles per cell
 BYTES_PER_PARTICLE = 128
 BYTES_PER_CANDIDATE = 128
 LEE_MODELS = ("paper", "mixing")
+MIXING = ("lee_model", "mixing")  # the keys only the mixing lee reads (config.setting's when)
 PAPER_MAX_AGE = 10.0  # s: the paper lee's particles die this old unless wind.max_age says
 
 
@@ -124,10 +125,18 @@ class ParticleConfig(WindConfig):
         choices=LEE_MODELS,
     )
     averaging_time: float = setting(
-        1.0, "s", "mixing lee: time constant of each cell's running mean of its wind", gt=0
+        1.0,
+        "s",
+        "mixing lee: time constant of each cell's running mean of its wind",
+        gt=0,
+        when=MIXING,
     )
     mixing_length_limit: float = setting(
-        MIXING_LENGTH_LIMIT, "m", "mixing lee: Blackadar's lambda of the eddy diffusivity", gt=0
+        MIXING_LENGTH_LIMIT,
+        "m",
+        "mixing lee: Blackadar's lambda of the eddy diffusivity",
+        gt=0,
+        when=MIXING,
     )
     recirculation_backflow: float = setting(
         0.4,
@@ -135,9 +144,14 @@ class ParticleConfig(WindConfig):
         "mixing lee: the wake eddy's backflow at the floor over the wind at the box's top",
         ge=0,
         le=1,
+        when=MIXING,
     )
     wake_mixing: float = setting(
-        0.05, "1", "mixing lee: wake eddy diffusivity over (wind at the box's top x height)", ge=0
+        0.05,
+        "1",
+        "mixing lee: wake eddy diffusivity over (wind at the box's top x height)",
+        ge=0,
+        when=MIXING,
     )
     recirculation_exponent: float = setting(
         2.0,
@@ -145,9 +159,15 @@ class ParticleConfig(WindConfig):
         "mixing lee: m of the wake eddy's profile (1 - (z/h)^m)^2; backflow below (2m+1)^(-1/m) h",
         ge=1,
         le=50,
+        when=MIXING,
     )
     recirculation_height: float = setting(
-        1.0, "1", "mixing lee: the wake cavity's height over the box's height", ge=0.5, le=3
+        1.0,
+        "1",
+        "mixing lee: the wake cavity's height over the box's height",
+        ge=0.5,
+        le=3,
+        when=MIXING,
     )
     seed: int = setting(0, "1", "random seed (conf/wind/particles.yaml sets ${seed})", ge=0)
 
