@@ -21,7 +21,13 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__", "numba_cache_dir", "prepare_numba_environment", "source_fingerprint"]
+__all__ = [
+    "__version__",
+    "numba_cache_dir",
+    "prepare_numba_environment",
+    "set_environment",
+    "source_fingerprint",
+]
 
 # OpenMP workers that wait passively (sleep) rather than spin: a spinning worker holds a
 # core that another process (or another run of a parallel sweep) needs, and a parallel
@@ -30,6 +36,7 @@ WAIT_POLICY = {"OMP_WAIT_POLICY": "passive"}
 
 
 CACHE_KEEP = 4  # source versions whose compiled kernels a cache folder keeps
+_SET: dict[str, str] = {}  # the variables :func:`prepare_numba_environment` set
 
 
 def source_fingerprint(package: Path) -> str:
@@ -80,14 +87,21 @@ def prepare_numba_environment() -> None:
     starts the OpenMP runtime) and the cache folder of these sources
     (:func:`numba_cache_dir`, read when numba is imported)."""
     for key, value in WAIT_POLICY.items():
-        os.environ.setdefault(key, value)
+        if key not in os.environ:
+            os.environ[key] = _SET[key] = value
     if "NUMBA_CACHE_DIR" not in os.environ and "numba" not in sys.modules:
         cache = numba_cache_dir()
         try:
             prune_cache(cache)
         except OSError:  # a folder that cannot be made: numba reports it when it caches
             pass
-        os.environ["NUMBA_CACHE_DIR"] = str(cache)
+        os.environ["NUMBA_CACHE_DIR"] = _SET["NUMBA_CACHE_DIR"] = str(cache)
+
+
+def set_environment() -> dict[str, str]:
+    """The environment variables the package set on import (not those the user had set):
+    a benchmark runs another program without them to time it as it ships."""
+    return dict(_SET)
 
 
 prepare_numba_environment()
