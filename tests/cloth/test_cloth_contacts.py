@@ -11,7 +11,7 @@ import pytest
 from windbench.cloth.collision import max_penetration
 from windbench.cloth.edge_contact import edge_minimum, surface_penetration
 from windbench.cloth.mesh import flag_mesh
-from windbench.cloth.model import ClothModel
+from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.self_contact import (
     _NEVER_FLAT,
     LEAF,
@@ -30,6 +30,7 @@ from windbench.cloth.self_contact import (
     self_intersections,
     tree_fit,
     triangles_cross,
+    untangle,
     vertex_moves,
 )
 from windbench.cloth.solver import XPBDCloth
@@ -386,6 +387,80 @@ def test_a_triangle_turned_over_does_not_carry_the_vertices_near_it_through_itse
     before = p.copy()
     assert self_contacts(sc, inv_mass, p, start, fit) == 0
     np.testing.assert_array_equal(p, before)
+
+
+def _poked(side):
+    """A small triangle (vertices 0-2) whose corner 0 lies 2 mm on the ``-side`` side of a
+    wide triangle (3-5) in the plane z = 0, its other corners 30 mm on the ``side`` side:
+    its two edges from corner 0 cross the wide triangle."""
+    small = np.array([[0.0, 0.0, -0.002], [0.05, 0.0, 0.03], [0.0, 0.05, 0.03]])
+    small[:, 2] *= side
+    rest = np.vstack([_triangle(0.02, 0.04), _triangle(0.3, 0.0)])
+    return np.vstack([small, _triangle(0.3, 0.0)]), self_contact_model(
+        rest, np.arange(6).reshape(2, 3), 0.005
+    )
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_a_corner_poked_through_a_pinned_triangle_is_taken_back_at_its_shallow_end(side):
+    """The pinned wide triangle stays; the shallow corner (2 mm through) is moved along the
+    normal to the thickness on its triangle's side, z = side x 5 mm, the deep corners stay,
+    and no pair crosses any more."""
+    p, sc = _poked(side)
+    before = p.copy()
+    assert self_intersections(sc, p) == 1
+    assert untangle(sc, np.r_[np.ones(3), np.zeros(3)], p, tree_fit(sc, 6)) == 1
+    assert self_intersections(sc, p) == 0
+    assert p[0, 2] == pytest.approx(side * 0.005, abs=1e-15)
+    np.testing.assert_array_equal(p[0, :2], before[0, :2])
+    np.testing.assert_array_equal(p[1:], before[1:])
+
+
+def test_untangling_two_free_triangles_keeps_their_momentum():
+    """Equal masses: the corner moves by g w n and the wide triangle's corners by -g beta_q
+    w n with sum beta_q = 1, so sum m dx = 0; the corner ends at the thickness from the
+    point of the wide triangle under it (fixed beta, the normal before the move), and
+    nothing crosses."""
+    p, sc = _poked(1.0)
+    before = p.copy()
+    assert untangle(sc, np.ones(6), p, tree_fit(sc, 6)) == 1
+    np.testing.assert_allclose((p - before).sum(axis=0), 0.0, atol=1e-15)
+    wide = before[3:]
+    e = np.cross(wide[1] - wide[0], wide[2] - wide[0])
+    area2 = np.linalg.norm(e)
+    beta = [np.cross(wide[(k + 2) % 3] - wide[(k + 1) % 3], before[0] - wide[(k + 1) % 3]) @ e
+            for k in range(3)] / area2**2  # fmt: skip
+    assert (beta > 0).all()
+    assert (p[0] - beta @ p[3:]) @ e / area2 == pytest.approx(0.005, abs=1e-12)
+    assert self_intersections(sc, p) == 0
+
+
+def test_a_sheet_started_through_another_is_untangled_in_the_first_frame():
+    """Sheet A lies 6 mm above sheet B (thickness 5 mm), with its vertices within 6 cm of
+    the middle pushed 2 mm through B: a crossing the contacts cannot undo, since they keep
+    each vertex on the side it started on. Both fall freely (the same acceleration: only
+    the contacts and the repair move them apart). No pair crosses after any of 20 frames,
+    and A's middle ends above B."""
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    lower = _sheet((-0.25, -0.25, 0.0), 0.5, 12, name="b")
+    upper = _sheet(
+        (-0.2 * c + 0.2 * s, -0.2 * s - 0.2 * c, 0.006), 0.4, 10, u=(c, s, 0), v=(-s, c, 0)
+    )
+    model = ClothModel.from_meshes([lower, upper])
+    x = model.rest_positions.copy()
+    n_lower = lower.n_vertices
+    middle = n_lower + np.flatnonzero(np.linalg.norm(x[n_lower:, :2], axis=1) < 0.06)
+    x[middle, 2] = -0.002
+    state = ClothState(x, np.zeros_like(x))
+    cfg = ClothConfig()
+    cfg.self_collision = True
+    solver = XPBDCloth(model, (), cfg)
+    assert solver.stats(state)["self_intersections"] > 0
+    states = _frames(solver, state, 20)
+    assert max(solver.stats(s)["self_intersections"] for s in states) == 0
+    end = states[-1].positions
+    below = np.linalg.norm(end[:n_lower, :2] - end[middle, :2].mean(axis=0), axis=1) < 0.1
+    assert end[middle, 2].min() > end[:n_lower][below, 2].max()
 
 
 def test_a_scene_without_cloth_has_an_empty_patch_tree():

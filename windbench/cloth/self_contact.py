@@ -53,9 +53,11 @@ from windbench.arrays import copy_rows
 LEAF = 4  # triangles per leaf patch at most
 REACH = 4.0  # a vertex this many thicknesses behind a triangle is brought back
 PASS_SWEEPS = 2  # passes of the self-contacts at most, while the last pushed a pair
+UNTANGLE_ROUNDS = 4  # rounds of :func:`untangle` at most, while the last moved an edge
 CONTACT_CONE = math.radians(60.0)  # a patch is flat for the contacts below this half-angle
 _COS_CONTACT = math.cos(CONTACT_CONE)
 _NEVER_FLAT = 2.0  # a cosine no cone reaches: boxes alone (the intersection figure)
+_COS_UNTANGLE = 0.0  # cos 90 degrees: the cones below it cull the untangling's search
 _WIDE = -2.0  # the cosine recorded for a cone of 90 degrees or more
 
 
@@ -868,6 +870,175 @@ def _crossing_count(sc, p, fit):
         f, g = candidates[q, 0], candidates[q, 1]
         count += triangles_cross(p, triangles[f], triangles[g])
     return count
+
+
+@njit(cache=True)
+def _shallow_end(p, a, i, j):
+    """(k, depth, s) for an edge i-j crossing triangle ``a``: its end k nearer to a's plane,
+    |height| of k, and the side s (+-1) of the other end."""
+    nx, ny, nz, _ = _plane(p, a)
+    hi, hj = _height(p, a, i, nx, ny, nz), _height(p, a, j, nx, ny, nz)
+    if abs(hi) < abs(hj):
+        return i, abs(hi), (1.0 if hj >= 0.0 else -1.0)
+    return j, abs(hj), (1.0 if hi >= 0.0 else -1.0)
+
+
+@njit(cache=True)
+def _uncross_edge(p, inv_mass, a, i, j, thickness):
+    """Edge i-j, if it crosses triangle ``a``, taken back through a's plane at its shallower
+    end k (:func:`_shallow_end`): k moved along a's unit normal n to ``thickness`` on the
+    side s of the other end, C = s h_k - thickness, h_k = (x_k - x_a0) . n, against a's
+    corners with the barycentric weights beta of k's projection (clamped into the
+    triangle) as in :func:`push_vertex`. Returns whether it moved."""
+    if not segment_crosses(p, i, j, a[0], a[1], a[2]):
+        return False
+    nx, ny, nz, area2 = _plane(p, a)
+    if area2 == 0.0:
+        return False
+    k, _, s = _shallow_end(p, a, i, j)
+    c = s * _height(p, a, k, nx, ny, nz) - thickness
+    beta = _clamped_barycentric(p, a, k, nx, ny, nz, area2)
+    den = inv_mass[k]
+    for q in range(3):
+        den += beta[q] * beta[q] * inv_mass[a[q]]
+    if c >= 0.0 or den <= 0.0:
+        return False
+    g = -c * s / den
+    for d, n in ((0, nx), (1, ny), (2, nz)):
+        p[k, d] += g * inv_mass[k] * n
+        for q in range(3):
+            p[a[q], d] -= g * beta[q] * inv_mass[a[q]] * n
+    return True
+
+
+@njit(cache=True)
+def _clamped_barycentric(p, tri, i, nx, ny, nz, area2):
+    """The barycentric coordinates of vertex i's projection on triangle ``tri``, negative
+    ones set to 0 and the rest rescaled to sum 1 (a point of the triangle)."""
+    b0 = max(0.0, _barycentric(p, tri, i, nx, ny, nz, area2, 0))
+    b1 = max(0.0, _barycentric(p, tri, i, nx, ny, nz, area2, 1))
+    b2 = max(0.0, _barycentric(p, tri, i, nx, ny, nz, area2, 2))
+    total = b0 + b1 + b2
+    if total == 0.0:
+        return (1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0)
+    return (b0 / total, b1 / total, b2 / total)
+
+
+@njit(cache=True)
+def untangle(sc, inv_mass, p, fit):
+    """Undo the crossings of the cloth with itself at positions ``p`` (in place). Every
+    edge that crosses a triangle (of the intersecting pairs :func:`self_intersections`
+    counts) is taken back through the triangle's plane at its shallower end, to the
+    thickness on the other end's side (:func:`_uncross_edge`). A vertex poked through a
+    sheet is the shallower end of all its crossing edges, while each edge of the sheet
+    that crosses the vertex's fan, judged against a steep fan triangle, names an end of
+    its own: the edges go in the order of how many crossing edges their shallower end
+    holds, most first (then the shallowest), so that the vertex goes back and the fan's
+    crossings with it. Rounds repeat, UNTANGLE_ROUNDS at most, while each leaves fewer
+    crossing edges than the one before (a region poked through comes back ring by ring
+    from its border); a round that does not is undone (a crease folded tighter than the
+    thickness, where a push crosses a neighbour: left to the next frame). The contacts
+    keep a vertex on the side it lay on at their last pass, so a crossing deeper than
+    the thickness would otherwise stay. A pairwise form of the intersection-contour
+    minimisation of Volino and Magnenat-Thalmann (2006). Returns the number of edges
+    moved; 0, and ``p`` unchanged, without a crossing."""
+    moved = 0
+    if sc.triangles.shape[0] < 2:
+        return moved
+    rows = _crossing_edges(sc, p, fit)
+    for _ in range(UNTANGLE_ROUNDS):
+        if rows.shape[0] == 0:
+            break
+        before = p.copy()
+        now = _take_back(sc, inv_mass, p, rows, _order(sc, p, rows), -1, 1.0)
+        after = _crossing_edges(sc, p, fit)
+        if after.shape[0] >= rows.shape[0]:
+            copy_rows(p, before, p.shape[0])
+            now, after = _one_edge(sc, inv_mass, p, fit, rows)
+            if now == 0:
+                break
+        moved += now
+        rows = after
+    return moved
+
+
+@njit(cache=True)
+def _one_edge(sc, inv_mass, p, fit, rows):
+    """(1, crossing edges after) for the first of the crossing edges ``rows`` (in the order
+    of :func:`_order`) whose move alone, to the thickness or to a tenth of it, leaves
+    fewer crossing edges; (0, rows) and ``p`` unchanged when none does."""
+    order = _order(sc, p, rows)
+    before = p.copy()
+    for r in order:
+        for clearance in (1.0, 0.1):
+            if _take_back(sc, inv_mass, p, rows, order, r, clearance):
+                after = _crossing_edges(sc, p, fit)
+                if after.shape[0] < rows.shape[0]:
+                    return 1, after
+                copy_rows(p, before, p.shape[0])
+    return 0, rows
+
+
+@njit(cache=True)
+def _crossing_edges(sc, p, fit):
+    """(E, 4) rows (i, j, f, k): edge i-j of an intersecting pair crossing triangle f, k its
+    shallower end, for the pairs at ``p``. The search culls by the boxes and by the normal
+    cones at 90 degrees (Volino and Magnenat-Thalmann 1994: a connected patch whose normals
+    lie within such a cone cannot cross itself unless its contour overlaps itself in
+    projection, module docstring); a frame's search by boxes alone, as the figure's, cost
+    as much as a contact pass."""
+    triangles = sc.triangles
+    refit(sc.tree, triangles, p, fit)
+    pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_UNTANGLE, 0.0)
+    candidates = _crossing_candidates(sc, p, pairs, found)
+    rows = np.empty((max(1, 6 * candidates.shape[0]), 4), np.int64)
+    n = 0
+    for q in range(candidates.shape[0]):
+        for side in range(2):
+            f, g = candidates[q, side], candidates[q, 1 - side]
+            a = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
+            for e in range(3):
+                i, j = triangles[g, e], triangles[g, (e + 1) % 3]
+                if segment_crosses(p, i, j, a[0], a[1], a[2]):
+                    rows[n, 0], rows[n, 1], rows[n, 2] = i, j, f
+                    rows[n, 3] = _shallow_end(p, a, i, j)[0]
+                    n += 1
+    return rows[:n]
+
+
+@njit(cache=True)
+def _order(sc, p, rows):
+    """The crossing edges ``rows`` (:func:`_crossing_edges`) in the order :func:`untangle`
+    takes them back: by their shallower end's count of crossing edges, most first, then by
+    its depth."""
+    triangles = sc.triangles
+    votes = np.zeros(p.shape[0], np.int64)
+    for r in range(rows.shape[0]):
+        votes[rows[r, 3]] += 1
+    key = np.empty(rows.shape[0])
+    for r in range(rows.shape[0]):
+        f = rows[r, 2]
+        a = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
+        depth = _shallow_end(p, a, rows[r, 0], rows[r, 1])[1]
+        key[r] = -votes[rows[r, 3]] + min(depth, 1.0) / 2.0  # a vote outweighs any depth
+    return np.argsort(key, kind="mergesort")
+
+
+@njit(cache=True)
+def _take_back(sc, inv_mass, p, rows, order, only, clearance):
+    """The crossing edges ``rows`` taken back in ``order`` (every one if ``only`` < 0, else
+    row ``only`` alone), each if it still crosses, to ``clearance`` thicknesses past the
+    plane (:func:`_uncross_edge`). Returns the number moved."""
+    triangles = sc.triangles
+    moved = 0
+    for r in order:
+        if only >= 0 and r != only:
+            continue
+        f = rows[r, 2]
+        a = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
+        gap = clearance * sc.thickness
+        moved += _uncross_edge(p, inv_mass, a, rows[r, 0], rows[r, 1], gap)
+    return moved
 
 
 def self_intersections(sc: SelfContact, positions) -> int:

@@ -8,8 +8,7 @@ constraint pass each): stiffness enters as a compliance alpha = 1/k, so it is st
 ``sim.dt = 1/60 s`` for any stiffness (stiff cloth: alpha -> 0), contacts are position
 projections inside each substep. Free fall is the exact symplectic-Euler parabola.
 
-A frame of length dt (:func:`xpbd_frame`), with ``h = dt / cloth.substeps``, does per
-substep
+A frame of length dt (:func:`xpbd_frame`), with ``h = dt / cloth.substeps``, does per substep
 
 1. ``v += h (g + f_ext / m)``; ``p = x + h v`` (pinned vertices: inverse mass 0);
 2. the constraint projections of :mod:`windbench.cloth.constraints`: ``edge_iterations``
@@ -24,12 +23,12 @@ substep
    contacts; an irregular mesh's edges one by one, their contacts after the last pass);
 4. ``v = (p - x) / h``; ``x = p``;
 
-and after the last substep 5. Rayleigh damping of the constraint rates. A hinge whose own
-oscillation ``omega^2 = k_b sum_q w_q |grad_q theta|^2`` a step of BEND_EVERY substeps
-resolves (``omega BEND_EVERY h <= 0.2`` for every hinge) is projected every BEND_EVERY-th
-substep with the impulse of that many (compliance alpha~ / BEND_EVERY). The external
-forces are held over the frame's substeps: the explicit coupling is stable while
-``dt rho_air C_D |v_rel| / (mass per area) < 2``.
+and after the last substep 5. the cloth's crossings of itself undone (positions only,
+with ``cloth.self_collision``: :func:`~windbench.cloth.self_contact.untangle`), 6.
+Rayleigh damping of the constraint rates. Hinges that a step of BEND_EVERY substeps
+resolves are projected every BEND_EVERY-th substep with that many substeps' impulse. The
+forces are held over the frame: the explicit coupling is stable while ``dt rho_air C_D
+|v_rel| / (mass per area) < 2``.
 
 The model (:class:`XPBDModel`: the constraint tables in solve order, contacts, settings)
 is fixed at construction; the per-dt constants (:class:`FrameConstants`) and the scratch
@@ -79,6 +78,7 @@ from windbench.cloth.self_contact import (
     self_contacts,
     self_intersections,
     tree_fit,
+    untangle,
 )
 from windbench.cloth.topology import build_topology, colour_order, tethers, thread_chains
 from windbench.errors import ConfigError, SimulationDiverged
@@ -205,6 +205,16 @@ def _frame_start(fit, x):
 
 
 @njit(cache=True)
+def _frame_end(model, fit, p):
+    """Step 5 with ``cloth.self_collision`` (whose patch fit ``fit`` is None otherwise):
+    the crossings of the cloth with itself at the frame's end positions ``p`` undone
+    (:func:`~windbench.cloth.self_contact.untangle`), after the last velocities were taken
+    from the positions: a repair of the positions that adds no velocity."""
+    if fit is not None:
+        untangle(model.self_contact, model.constraints.inv_mass, p, fit)
+
+
+@njit(cache=True)
 def _all_contacts(model, p, xp, normal, clear, fit, last):
     """Step 3: the cloth's edges and triangles
     (:func:`~windbench.cloth.edge_contact.surface_contacts`) and its vertices
@@ -302,7 +312,7 @@ def _frame_figures(c, f_ext, x, p, v):
 
 @njit(cache=True)
 def xpbd_frame(model, frame, x, v, f_ext, out, work):
-    """One frame of ``substeps`` XPBD substeps (module docstring, steps 1-5).
+    """One frame of ``substeps`` XPBD substeps (module docstring, steps 1-6).
 
     Inputs x, v, f_ext (n, 3); outputs ``out`` = (x_out, v_out); ``work`` = the
     :class:`Workspace` arrays in field order (x scratch (n, 3), multipliers (E,), chain
@@ -334,6 +344,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
             for k in range(3):
                 vv[i, k] = (p[i, k] - xp[i, k]) * inv_h
                 xp[i, k] = p[i, k]
+    _frame_end(model, fit, p)  # 5.
     damp_velocities(p, vv, c.inv_mass, c.edges, c.edge_damping, c.hinges, c.hinge_damping, frame.dt)
     return _frame_figures(c, f_ext, x, p, vv)
 
@@ -672,8 +683,15 @@ class XPBDCloth:
 
     def step(self, state: ClothState, external_forces, dt: float) -> ClothState:
         """Advance all cloths by one frame ``dt`` under gravity and ``external_forces`` (N);
-        moving bodies follow their motion from ``state.frames dt`` (frames of equal dt)."""
+        moving bodies follow their motion from ``state.frames dt`` (frames of equal dt).
+        With ``cloth.self_collision`` the first frame starts from positions whose
+        crossings with themselves are undone (a mesh made that way; later frames end
+        untangled, step 5 of the module docstring)."""
         x = np.ascontiguousarray(state.positions, dtype=np.float64)
+        if state.frames == 0 and self.workspace.fit is not None:
+            x = x.copy()
+            inv_mass = self.tables.constraints.inv_mass
+            untangle(self.tables.self_contact, inv_mass, x, self.workspace.fit)
         v = np.ascontiguousarray(state.velocities, dtype=np.float64)
         f = np.ascontiguousarray(external_forces, dtype=np.float64).reshape(x.shape)
         frame = self.frame_constants(float(dt))
