@@ -6,7 +6,7 @@ the same run.
 
     PYTHONPATH=. python experiments/bench_ns.py [--resolutions 64 128] [--steps 10]
         [--precisions float64 float32] [--advection semi_lagrangian second_order]
-        [--no-baseline]
+        [--no-baseline] [--set "KEY=VALUE ..." ...] [--out CSV]
     PYTHONPATH=. python experiments/bench_ns.py --validation
 
 
@@ -15,9 +15,11 @@ scheme (medians over the timed steps after two warm-up steps) with ``baseline_se
 ``ratio_to_baseline`` (the baseline as it ships: numba's default OpenMP wait, whose
 spinning threads start each parallel loop sooner) and ``baseline_passive_seconds`` and
 ``ratio_to_baseline_passive`` (the baseline under windbench's passive wait policy, which
-this process runs under; the two differ most on small grids). The variants of one resolution are stepped in turn (A, B, A, B,
-...), so that a change in the machine's load hits them alike; the load average (``uptime``)
-is printed and recorded, since the machine's 2 cores are shared. ``setup_seconds``
+this process runs under; the two differ most on small grids). ``--set`` adds variants of
+further overrides (column ``overrides``; ``""``: none). The variants of one resolution
+are stepped in turn (A, B, A, B, ...), so that a change in the machine's load hits them
+alike; the load average (``uptime``) is printed and recorded, since the machine's 2
+cores are shared. ``setup_seconds``
 (backend construction, incl. loading or compiling the numba kernels) and
 ``first_step_seconds`` are reported separately; run the script twice to see cached-compile
 figures (numba cache=True).
@@ -82,10 +84,11 @@ def array_bytes(obj) -> int:
 class Variant:
     """One backend configuration at one resolution, built and warmed up."""
 
-    def __init__(self, resolution, precision, advection, turbulence):
+    def __init__(self, resolution, precision, advection, turbulence, overrides=()):
         self.key = dict(
             resolution=resolution, precision=precision, advection=advection, turbulence=turbulence
         )
+        self.key["overrides"] = " ".join(overrides)
         cfg = compose_config(
             [
                 "experiment=scaling",  # scene=fence in a cube: resolution r gives r^3 cells
@@ -94,6 +97,7 @@ class Variant:
                 f"wind.precision={precision}",
                 f"wind.advection={advection}",
                 *([f"wind.turbulence={turbulence}"] if turbulence else []),
+                *overrides,
             ]
         )
         self.cfg, self.setup = cfg, prepare(cfg)
@@ -153,8 +157,8 @@ def baseline(resolution: int, folder: Path, as_shipped: bool) -> float:
 
 def bench(resolution: int, args) -> list[dict]:
     variants = [
-        Variant(resolution, p, a, args.turbulence)
-        for p, a in product(args.precisions, args.advection)
+        Variant(resolution, p, a, args.turbulence, tuple(o.split()))
+        for p, a, o in product(args.precisions, args.advection, args.set)
     ]
     for _ in range(args.steps):  # in turn: the load hits every variant alike
         for v in variants:
@@ -201,6 +205,12 @@ def main():
     ap.add_argument("--precisions", nargs="+", default=["float64", "float32"])
     ap.add_argument("--advection", nargs="+", default=["semi_lagrangian"])
     ap.add_argument("--turbulence", default=None, help="wind.turbulence (default: the config's)")
+    ap.add_argument(
+        "--set",
+        nargs="+",
+        default=[""],
+        help='override sets, each a variant: --set "" "wind.pressure_tol=1e-5"',
+    )
     ap.add_argument("--baselines", type=Path, default=BASELINES)
     ap.add_argument("--no-baseline", dest="baselines", action="store_const", const=None)
     ap.add_argument("--out", type=Path, default=OUT)
@@ -225,7 +235,9 @@ def main():
             print(f"{prec} {adv}: cost ~ cells^{slope:.2f} over {list(g.resolution)}")
     print(
         df.pivot_table(
-            index="resolution", columns=["precision", "advection"], values="step_seconds"
+            index="resolution",
+            columns=["precision", "advection", "overrides"],
+            values="step_seconds",
         ).mul(1e3).round(2).to_string()
         + "\n(ms per step; baseline ms: "
         + ", ".join(f"{r}: {b * 1e3:.1f}" for r, b in df.groupby("resolution").baseline_seconds.first().items())
