@@ -68,6 +68,14 @@ def test_importing_windbench_makes_openmp_wait_passively():
     assert _fresh_python(code, OMP_WAIT_POLICY="active") == "active"  # the user's choice
 
 
+def test_the_package_names_the_variables_it_set_and_not_the_users():
+    """set_environment() lists what the import set, so that a benchmark can run another
+    program without it; a variable the user had set is theirs and is not listed."""
+    code = "import windbench; print(sorted(windbench.set_environment()))"
+    assert _fresh_python(code) == "['NUMBA_CACHE_DIR', 'OMP_WAIT_POLICY']"
+    assert _fresh_python(code, OMP_WAIT_POLICY="active") == "['NUMBA_CACHE_DIR']"
+
+
 def _package(folder: Path, callee_value: int) -> Path:
     """A package whose cached kernel ``a.f`` calls ``b.g`` (another module), g = value."""
     folder.mkdir(parents=True, exist_ok=True)
