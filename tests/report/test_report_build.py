@@ -132,6 +132,7 @@ def test_figures_and_pages_exist(report):
     assert "http://" not in html and "https://" not in html  # opens offline
     # the figures that need backends not in the inputs say which runs would produce them
     assert "Not drawn" in md and "wind=particles" in md
+    assert f"Made by {report.summary['code'].iloc[0]}." in md  # one version made them all
 
 
 def test_corrupted_and_failed_runs_are_listed_and_do_not_stop_the_report(

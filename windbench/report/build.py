@@ -22,6 +22,7 @@ from windbench.report import comparison as C
 from windbench.report import figures as F
 from windbench.report.collect import (
     RunRecord,
+    code_versions,
     combine,
     display_path,
     find_invalid,
@@ -284,6 +285,18 @@ def _placer(report: Report, fig_dir: Path, regenerate: str):
     return place
 
 
+def _versions_note(records) -> str:
+    """Which code made the runs (every run file records its version)."""
+    versions = code_versions(records) or ["an unknown code version"]
+    if len(versions) == 1:
+        return f"Made by {versions[0]}."
+    return (
+        f"Made by {len(versions)} code versions (`summary.csv` column `code`): "
+        + "; ".join(versions)
+        + "."
+    )
+
+
 def _overview(report: Report, inputs, reference) -> Section:
     counts = report.summary["status"].value_counts().to_dict()
     dims = swept_keys(report.records)
@@ -298,7 +311,8 @@ def _overview(report: Report, inputs, reference) -> Section:
                 + ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
                 + ". Swept settings (dimensions of `results.nc`): "
                 + ", ".join(f"`{d}`" for d in dims)
-                + "."
+                + ". "
+                + _versions_note(report.records)
             ),
             Text(
                 "Every statistic is taken over a run's steady window: from two flow-through "
