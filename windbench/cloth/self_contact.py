@@ -952,7 +952,9 @@ def untangle(sc, inv_mass, p, fit):
         if rows.shape[0] == 0:
             break
         before = p.copy()
-        now = _take_back(sc, inv_mass, p, rows, _order(sc, p, rows), -1, 1.0)
+        now = 0
+        for r in range(rows.shape[0]):
+            now += _take_back(sc, inv_mass, p, rows, r, 1.0)
         after = _crossing_edges(sc, p, fit)
         if after.shape[0] >= rows.shape[0]:
             copy_rows(p, before, p.shape[0])
@@ -966,14 +968,13 @@ def untangle(sc, inv_mass, p, fit):
 
 @njit(cache=True)
 def _one_edge(sc, inv_mass, p, fit, rows):
-    """(1, crossing edges after) for the first of the crossing edges ``rows`` (in the order
-    of :func:`_order`) whose move alone, to the thickness or to a tenth of it, leaves
-    fewer crossing edges; (0, rows) and ``p`` unchanged when none does."""
-    order = _order(sc, p, rows)
+    """(1, crossing edges after) for the first of the crossing edges ``rows`` (in their
+    order) whose move alone, to the thickness or to a tenth of it, leaves fewer crossing
+    edges; (0, rows) and ``p`` unchanged when none does."""
     before = p.copy()
-    for r in order:
+    for r in range(rows.shape[0]):
         for clearance in (1.0, 0.1):
-            if _take_back(sc, inv_mass, p, rows, order, r, clearance):
+            if _take_back(sc, inv_mass, p, rows, r, clearance):
                 after = _crossing_edges(sc, p, fit)
                 if after.shape[0] < rows.shape[0]:
                     return 1, after
@@ -984,16 +985,19 @@ def _one_edge(sc, inv_mass, p, fit, rows):
 @njit(cache=True)
 def _crossing_edges(sc, p, fit):
     """(E, 4) rows (i, j, f, k): edge i-j of an intersecting pair crossing triangle f, k its
-    shallower end, for the pairs at ``p``. The search culls by the boxes and by the normal
-    cones at 90 degrees (Volino and Magnenat-Thalmann 1994: a connected patch whose normals
-    lie within such a cone cannot cross itself unless its contour overlaps itself in
-    projection, module docstring): searched by boxes alone, as the figure is, it added 40 %
-    to the frame of a flapping 40x25 flag, with the cones 6 % (``bench_cloth.py``)."""
+    shallower end, for the pairs at ``p``, in the order :func:`untangle` takes them back:
+    by how many crossing edges their shallower end holds, most first, then by its depth.
+    The search culls by the boxes and by the normal cones at 90 degrees (Volino and
+    Magnenat-Thalmann 1994: a connected patch whose normals lie within such a cone cannot
+    cross itself unless its contour overlaps itself in projection, module docstring):
+    searched by boxes alone, as the figure is, it added 40 % to the frame of a flapping
+    40x25 flag, with the cones 6 % (``bench_cloth.py``)."""
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
     pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_UNTANGLE, 0.0)
     candidates = _crossing_candidates(sc, p, pairs, found)
     rows = np.empty((max(1, 6 * candidates.shape[0]), 4), np.int64)
+    depth = np.empty(rows.shape[0])
     n = 0
     for q in range(candidates.shape[0]):
         for side in range(2):
@@ -1003,44 +1007,24 @@ def _crossing_edges(sc, p, fit):
                 i, j = triangles[g, e], triangles[g, (e + 1) % 3]
                 if segment_crosses(p, i, j, a[0], a[1], a[2]):
                     rows[n, 0], rows[n, 1], rows[n, 2] = i, j, f
-                    rows[n, 3] = _shallow_end(p, a, i, j)[0]
+                    rows[n, 3], depth[n] = _shallow_end(p, a, i, j)[:2]
                     n += 1
-    return rows[:n]
-
-
-@njit(cache=True)
-def _order(sc, p, rows):
-    """The crossing edges ``rows`` (:func:`_crossing_edges`) in the order :func:`untangle`
-    takes them back: by their shallower end's count of crossing edges, most first, then by
-    its depth."""
-    triangles = sc.triangles
     votes = np.zeros(p.shape[0], np.int64)
-    for r in range(rows.shape[0]):
+    for r in range(n):
         votes[rows[r, 3]] += 1
-    key = np.empty(rows.shape[0])
-    for r in range(rows.shape[0]):
-        f = rows[r, 2]
-        a = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
-        depth = _shallow_end(p, a, rows[r, 0], rows[r, 1])[1]
-        key[r] = -votes[rows[r, 3]] + min(depth, 1.0) / 2.0  # a vote outweighs any depth
-    return np.argsort(key, kind="mergesort")
+    key = np.empty(n)
+    for r in range(n):
+        key[r] = -votes[rows[r, 3]] + min(depth[r], 1.0) / 2.0  # a vote outweighs any depth
+    return rows[:n][np.argsort(key, kind="mergesort")]
 
 
 @njit(cache=True)
-def _take_back(sc, inv_mass, p, rows, order, only, clearance):
-    """The crossing edges ``rows`` taken back in ``order`` (every one if ``only`` < 0, else
-    row ``only`` alone), each if it still crosses, to ``clearance`` thicknesses past the
-    plane (:func:`_uncross_edge`). Returns the number moved."""
-    triangles = sc.triangles
-    moved = 0
-    for r in order:
-        if only >= 0 and r != only:
-            continue
-        f = rows[r, 2]
-        a = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
-        gap = clearance * sc.thickness
-        moved += _uncross_edge(p, inv_mass, a, rows[r, 0], rows[r, 1], gap)
-    return moved
+def _take_back(sc, inv_mass, p, rows, r, clearance):
+    """Crossing edge ``rows[r]`` taken back if it still crosses, to ``clearance``
+    thicknesses past the plane (:func:`_uncross_edge`). Returns whether it moved."""
+    f = rows[r, 2]
+    a = (sc.triangles[f, 0], sc.triangles[f, 1], sc.triangles[f, 2])
+    return _uncross_edge(p, inv_mass, a, rows[r, 0], rows[r, 1], clearance * sc.thickness)
 
 
 def self_intersections(sc: SelfContact, positions) -> int:
