@@ -32,6 +32,7 @@ from windbench.cloth.self_contact import (
     triangles_cross,
     untangle,
     vertex_moves,
+    vertex_rings,
 )
 from windbench.cloth.solver import XPBDCloth
 from windbench.config import ClothConfig
@@ -433,6 +434,41 @@ def test_untangling_two_free_triangles_keeps_their_momentum():
     assert (beta > 0).all()
     assert (p[0] - beta @ p[3:]) @ e / area2 == pytest.approx(0.005, abs=1e-12)
     assert self_intersections(sc, p) == 0
+
+
+# A crumple from a shirt run (10 vertices, in units of 10 um, about their centroid): the
+# fan of vertex 4 folded tighter than the thickness (edges 13-19 mm), so that the apex of
+# triangle (0, 4, 5) and that of (4, 3, 8) poke through each other's fans.
+CRUMPLE = 1e-5 * np.array([
+    [-252, -869, -578], [261, -317, 535], [857, -1486, -409], [744, -125, -1187],
+    [-309, -164, 175], [297, 158, -51], [-545, 517, 806], [69, 1010, 368],
+    [-494, 609, -299], [-629, 668, 640],
+])  # fmt: skip
+CRUMPLE_TRIANGLES = np.array([
+    [4, 2, 3], [5, 4, 6], [0, 4, 5], [0, 2, 4], [0, 5, 1], [5, 6, 7], [1, 5, 7],
+    [9, 4, 8], [4, 3, 8], [4, 9, 6],
+])  # fmt: skip
+
+
+def test_a_crumple_whose_apexes_poke_through_each_other_is_opened():
+    """No edge taken back alone or with the others leaves fewer crossings here (each
+    apex's neighbours lie on both sides of the other fan); pulling the apexes into their
+    rings does: no pair crosses after, a brute-force search agrees, momentum is kept (equal
+    masses), and each apex moved less than the fold's edges are long."""
+    p = CRUMPLE.copy()
+    sc = self_contact_model(p, CRUMPLE_TRIANGLES, 0.005)
+    assert _brute_force_crossings(CRUMPLE_TRIANGLES, p) == 1
+    assert untangle(sc, np.ones(len(p)), p, tree_fit(sc, len(p))) == 1
+    assert self_intersections(sc, p) == 0 == _brute_force_crossings(CRUMPLE_TRIANGLES, p)
+    np.testing.assert_allclose((p - CRUMPLE).sum(axis=0), 0.0, atol=1e-15)
+    assert np.linalg.norm(p - CRUMPLE, axis=1).max() < 0.013
+
+
+def test_the_vertex_rings_are_the_ends_of_each_vertex_edges():
+    ptr, ring = vertex_rings(CRUMPLE_TRIANGLES, len(CRUMPLE))
+    for v in range(len(CRUMPLE)):
+        edges = CRUMPLE_TRIANGLES[(CRUMPLE_TRIANGLES == v).any(axis=1)]
+        assert ring[ptr[v] : ptr[v + 1]].tolist() == sorted(set(edges.ravel()) - {v})
 
 
 def test_a_sheet_started_through_another_is_untangled_in_the_first_frame():

@@ -91,6 +91,8 @@ class SelfContact(NamedTuple):
     triangles: np.ndarray  # (m, 3) global vertex ids, every cloth
     thickness: float  # m
     tree: PatchTree
+    ring_ptr: np.ndarray  # (n + 1,) vertex i's neighbours are ring[ring_ptr[i]:ring_ptr[i + 1]]
+    ring: np.ndarray  # (2 E,) the other ends of each vertex's edges (:func:`vertex_rings`)
 
 
 class TreeFit(NamedTuple):
@@ -205,11 +207,20 @@ def patch_tree(rest, triangles) -> PatchTree:
     )
 
 
+def vertex_rings(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """(ptr, ring): each vertex's neighbours along the edges of ``triangles``, ascending."""
+    pairs = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    both = np.unique(np.vstack([pairs, pairs[:, ::-1]]), axis=0)
+    ptr = np.searchsorted(both[:, 0], np.arange(n_vertices + 1)).astype(np.int64)
+    return ptr, np.ascontiguousarray(both[:, 1], np.int64)
+
+
 def self_contact_model(rest, triangles, thickness: float) -> SelfContact:
     """:class:`SelfContact` with the patch hierarchy of the rest positions."""
     tri = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     rest = np.asarray(rest, np.float64)
-    return SelfContact(tri, float(thickness), patch_tree(rest, tri))
+    ring_ptr, ring = vertex_rings(tri, rest.shape[0])
+    return SelfContact(tri, float(thickness), patch_tree(rest, tri), ring_ptr, ring)
 
 
 def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
@@ -938,12 +949,13 @@ def untangle(sc, inv_mass, p, fit):
     crossing edges than the one before (a region poked through comes back ring by ring
     from its border); a round that does not is undone and the edges are tried one at a
     time instead (:func:`_one_edge`: in a crease folded tighter than the thickness the
-    push of one edge crosses a neighbour); when none helps, the crossing is left to the
-    next frame. The contacts
-    keep a vertex on the side it lay on at their last pass, so a crossing deeper than
-    the thickness would otherwise stay. A pairwise form of the intersection-contour
-    minimisation of Volino and Magnenat-Thalmann (2006). Returns the number of edges
-    moved; 0, and ``p`` unchanged, without a crossing."""
+    push of one edge crosses a neighbour), and when none helps, the shallower ends are
+    pulled into their rings (:func:`_unfold`: a crumple of a few triangles); when that
+    does not help either, the crossing is left to the next frame. The contacts keep a
+    vertex on the side it lay on at their last pass, so a crossing deeper than the
+    thickness would otherwise stay. A pairwise form of the intersection-contour
+    minimisation of Volino and Magnenat-Thalmann (2006). Returns the number of moves
+    kept (an edge, or one unfolding); 0, and ``p`` unchanged, without a crossing."""
     moved = 0
     if sc.triangles.shape[0] < 2:
         return moved
@@ -959,6 +971,8 @@ def untangle(sc, inv_mass, p, fit):
         if after.shape[0] >= rows.shape[0]:
             copy_rows(p, before, p.shape[0])
             now, after = _one_edge(sc, inv_mass, p, fit, rows)
+            if now == 0:
+                now, after = _kept_if_fewer(sc, p, fit, rows, _unfold(sc, inv_mass, p, rows))
             if now == 0:
                 break
         moved += now
@@ -980,6 +994,50 @@ def _one_edge(sc, inv_mass, p, fit, rows):
                     return 1, after
                 copy_rows(p, before, p.shape[0])
     return 0, rows
+
+
+@njit(cache=True)
+def _unfold(sc, inv_mass, p, rows):
+    """A copy of ``p`` in which each distinct shallower end k of the crossing edges
+    ``rows`` is pulled to the centroid of its ring of neighbours j (the umbrella operator;
+    Taubin 1995): C = x_k - (1/n) sum_j x_j = 0, projected with the inverse masses w as a
+    position constraint, lam = -C / (w_k + sum_j w_j / n^2), dx_k = w_k lam, dx_j =
+    -(w_j / n) lam (momentum kept). It opens a crumple of a few triangles folded tighter
+    than the thickness, whose apex poke through each other's fans so that taking one
+    apex back pushes its neighbours through."""
+    q = p.copy()
+    done = np.zeros(p.shape[0], np.bool_)
+    for r in range(rows.shape[0]):
+        k = rows[r, 3]
+        start, stop = sc.ring_ptr[k], sc.ring_ptr[k + 1]
+        if done[k] or stop == start:
+            continue
+        done[k] = True
+        n = stop - start
+        centroid = np.zeros(3)
+        w_ring = 0.0
+        for m in range(start, stop):
+            centroid += q[sc.ring[m]] / n
+            w_ring += inv_mass[sc.ring[m]]
+        den = inv_mass[k] + w_ring / (n * n)
+        if den <= 0.0:
+            continue
+        lam = (centroid - q[k]) / den
+        q[k] += inv_mass[k] * lam
+        for m in range(start, stop):
+            q[sc.ring[m]] -= inv_mass[sc.ring[m]] / n * lam
+    return q
+
+
+@njit(cache=True)
+def _kept_if_fewer(sc, p, fit, rows, q):
+    """(1, crossing edges at q) with ``p`` set to ``q`` if q leaves fewer crossing edges
+    than ``rows``; else (0, rows), p unchanged."""
+    after = _crossing_edges(sc, q, fit)
+    if after.shape[0] >= rows.shape[0]:
+        return 0, rows
+    copy_rows(p, q, p.shape[0])
+    return 1, after
 
 
 @njit(cache=True)
