@@ -22,7 +22,9 @@ the way up, so that the cycle is the symmetric positive definite preconditioner 
 The first coarse levels correct twice (a W, ``W_LEVELS``), the others once (a V); the
 cycle runs in single precision (``PRECONDITIONER_DTYPE``), CG in double. The levels below
 ``SERIAL_CELLS`` cells run as one compiled call on flat tables (:mod:`.coarse_levels`);
-those below ``threads.PARALLEL_CELLS`` use the kernels' serial versions (:mod:`.threads`).
+those below ``threads.PARALLEL_CELLS`` use the kernels' serial versions (:mod:`.threads`),
+the others smooth slab by slab in a wavefront (:func:`gauss_seidel`: the same numbers in
+two parallel loops instead of one per half sweep).
 
 The kernels work row by row along z, with each row classified once per weight change
 (:func:`classify_rows`): ALL_OPEN rows use the constant 7-point stencil, ROW_CONSTANT rows
@@ -47,10 +49,14 @@ from numba import njit, prange
 
 from windbench.wind.navier_stokes.coarse_levels import CoarseLevels
 from windbench.wind.navier_stokes.flags import FAST_MATH
-from windbench.wind.navier_stokes.threads import select, threaded
+from windbench.wind.navier_stokes.threads import PARALLEL_CELLS, select, threaded
 
 SERIAL_CELLS = 32768  # levels with fewer cells run on one thread (:mod:`.coarse_levels`)
 PRE_SWEEPS = 2  # per level and direction
+# Planes per slab of the smoother on the levels in the kernels' parallel versions
+# (:func:`gauss_seidel`; at least 2 (2 PRE_SWEEPS) - 1): 128 KB per float32 field and
+# slab at 64^3.
+SLAB_PLANES = 8
 # Levels whose coarse-grid correction is two cycles of the next level (a W on the first
 # coarse levels, a V below): 5 / 5 / 5 MGPCG iterations to 1e-6 at 32^3 / 64^3 / 128^3 on
 # the fence against 6 / 6 / 7 with a plain V-cycle (one solve, two threads, A/B in one
@@ -379,14 +385,21 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
 
 
 @threaded(fastmath=FAST_MATH)
-def gauss_seidel(x, b, level, colour, halves, r, partial):
+def gauss_seidel(x, b, level, colour, halves, r, partial, slabs):
     """``halves`` half sweeps of red-black SOR (the level's omega, coef[6]) on A x = b,
-    alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first), planes
-    in parallel: a cycle's smoothing on one level is one call (the Python loop of one call per half
+    alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first): a
+    cycle's smoothing on one level is one call (the Python loop of one call per half
     sweep cost about 2 ms per step at 64^3, measured with cProfile).
 
-    On a periodic x axis with an odd number of planes the last plane neighbours the first
-    one in the same colour: it is done after the parallel loop (no race, bit-reproducible).
+    With ``slabs`` (:func:`slab_bounds`) of at least 2 halves - 1 planes each, in two
+    parallel loops (:func:`_slab_wavefront`, then :func:`_seam`) instead of one per half
+    sweep: the same updates from the same neighbour values as the plain sweeps, so the
+    same bits, with one wake-up of the threads less per half sweep beyond the first two
+    (60-80 microseconds each under the passive wait, :mod:`windbench.runtime`) and each
+    plane swept while it is in the cache. Otherwise the half sweeps one after the other,
+    planes in parallel; on a periodic x axis with an odd number of planes the last plane
+    neighbours the first one in the same colour and is done after the parallel loop (no
+    race, bit-reproducible).
 
     With ``partial`` of one entry per plane (else empty): returns r . x after the last
     half sweep, each plane's share taken as soon as that sweep has finished the plane
@@ -395,8 +408,15 @@ def gauss_seidel(x, b, level, colour, halves, r, partial):
     """
     nx = x.shape[0]
     periodic = level[3]
-    last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
     with_dot = partial.shape[0] == nx
+    if _wavefront_fits(slabs, halves, periodic[0]):
+        n_slabs = slabs.shape[0] - 1
+        for s in prange(n_slabs):
+            _slab_wavefront(x, b, level, colour, halves, r, partial, slabs, np.int64(s))
+        for s in prange(n_slabs):
+            _seam(x, b, level, colour, halves, r, partial, slabs, np.int64(s))
+        return ordered_sum(partial) if with_dot else 0.0
+    last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
     for half in range(halves):
         c = (colour + half) % 2
         final = with_dot and half == halves - 1
@@ -409,6 +429,84 @@ def gauss_seidel(x, b, level, colour, halves, r, partial):
             if final:
                 partial[i] = _plane_dot(r, x, i)
     return ordered_sum(partial) if with_dot else 0.0
+
+
+@njit(cache=True)
+def _wavefront_fits(slabs, halves, periodic_x):
+    """Whether :func:`gauss_seidel` can sweep by slabs: more than one slab, each of at
+    least 2 halves - 1 planes (the seams' wedges then neither meet nor read each other's
+    planes), and no periodic x axis of an odd number of planes."""
+    n_slabs = slabs.shape[0] - 1
+    if n_slabs < 2 or (periodic_x and slabs[n_slabs] % 2 == 1):
+        return False
+    for s in range(n_slabs):
+        if slabs[s + 1] - slabs[s] < 2 * halves - 1:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _has_seam_below(slabs, s, periodic_x):
+    """Whether slab s has another slab below it (slab 0: the last one, on a periodic x)."""
+    return s > 0 or periodic_x
+
+
+@njit(cache=True, error_model="numpy")
+def _slab_wavefront(x, b, level, colour, halves, r, partial, slabs, s):
+    """The half sweeps of slab s's planes [lo, hi) that need no plane of another slab
+    after its first half sweep: half sweep h on the planes lo + h c_lo <= i < hi - h c_hi,
+    c = 1 at an end with another slab beyond it (a seam), 0 at a wall, so a trapezoid.
+
+    Half sweep h of plane i reads the other colour on planes i - 1 and i + 1, which must
+    have had half sweep h - 1 and not yet h + 1 (h itself changes the colour not read).
+    The planes go as a wavefront: at step t, half sweep h on plane t - h, h = 0, 1, ...,
+    so plane i + 1 has just had h - 1 and plane i - 1 has h + 1 still ahead. Across a
+    seam the slabs run at once: the first half sweep of the plane beside it changes only
+    the colour the other slab's plane does not read, and the planes beside a seam get no
+    further half sweep here (:func:`_seam` finishes them)."""
+    periodic = level[3]
+    n_slabs = slabs.shape[0] - 1
+    lo, hi = slabs[s], slabs[s + 1]
+    cut_lo = 1 if _has_seam_below(slabs, s, periodic[0]) else 0
+    cut_hi = 1 if (s < n_slabs - 1 or periodic[0]) else 0
+    with_dot = partial.shape[0] == x.shape[0]
+    for t in range(lo, hi + halves - 1):
+        for h in range(halves):
+            i = t - h
+            if lo + h * cut_lo <= i < hi - h * cut_hi:
+                _gs_plane(x, b, level, i, (colour + h) % 2)
+                if with_dot and h == halves - 1:
+                    partial[i] = _plane_dot(r, x, i)
+
+
+@njit(cache=True, error_model="numpy")
+def _seam(x, b, level, colour, halves, r, partial, slabs, s):
+    """The half sweeps :func:`_slab_wavefront` left around the seam below slab s (none
+    for slab 0 below a wall): after it, plane seam + m above the seam has had half sweeps
+    0..m and plane seam - 1 - m below it 0..m, so half sweep h = 1, 2, ... goes on the h
+    planes on either side nearest the seam, whose neighbours have then had h - 1 and,
+    outside the wedge, exactly h (they are inside the slabs' trapezoids, which a
+    neighbouring seam's wedge does not reach: 2 halves - 1 planes per slab at least)."""
+    periodic = level[3]
+    if not _has_seam_below(slabs, s, periodic[0]):
+        return
+    nx = x.shape[0]
+    seam = slabs[s]
+    with_dot = partial.shape[0] == nx
+    for h in range(1, halves):
+        for m in range(h):
+            for i in ((seam - 1 - m) % nx, seam + m):
+                _gs_plane(x, b, level, i, (colour + h) % 2)
+                if with_dot and h == halves - 1:
+                    partial[i] = _plane_dot(r, x, i)
+
+
+def slab_bounds(planes: int, per_slab: int) -> np.ndarray:
+    """The first plane of each slab of :func:`gauss_seidel`, then ``planes``: slabs of
+    about ``per_slab`` planes (at least that many where there are two or more), as equal
+    as they can be; one slab if per_slab <= 0."""
+    count = 1 if per_slab <= 0 else max(1, planes // per_slab)
+    return (np.arange(count + 1, dtype=np.int64) * planes) // count
 
 
 @threaded()
@@ -613,6 +711,9 @@ class _Level:
         # small levels run in one compiled call per visit (:mod:`.coarse_levels`)
         self.small = np.prod(self.shape) < SERIAL_CELLS
         self.partial = np.zeros(nx)  # per-plane sums of the smoother's dot
+        # the smoother's slabs (gauss_seidel): on the levels in the parallel versions
+        on_threads = self.cells >= PARALLEL_CELLS
+        self.slabs = slab_bounds(nx, SLAB_PLANES if on_threads else 0)
 
     def args(self) -> Stencil:
         w = self.w
@@ -630,7 +731,8 @@ class _Level:
         ``r`` (float64, the level's shape) returns r . x after them (:func:`gauss_seidel`)."""
         r, partial = NO_DOT if r is None else (r, self.partial)
         smoother = gauss_seidel.on(self.cells)
-        return smoother(x, b, self.args(), 1 if reverse else 0, 2 * sweeps, r, partial)
+        colour = 1 if reverse else 0
+        return smoother(x, b, self.args(), colour, 2 * sweeps, r, partial, self.slabs)
 
 
 class MultigridPoisson:
