@@ -2,7 +2,7 @@
 
 On the fence of ``experiment=scaling`` (as ``bench_ns.py`` builds it, float32, after two
 steps), each multigrid level that sweeps by slabs (:func:`~windbench.wind.navier_stokes.
-multigrid.gauss_seidel`) runs its smoothing of one cycle visit (2 sweeps, with CG's dot)
+multigrid.smooth_by_slabs`) runs its smoothing of one cycle visit (2 sweeps, with CG's dot)
 ``--calls`` times, alternately with its slabs and with one slab (the plain half sweeps,
 one parallel loop each), and the two medians and their ratio are recorded. Both give the
 same bits (``tests/wind/navier_stokes/test_multigrid.py``); alternating call by call

@@ -97,8 +97,8 @@ def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega
     # the smoother works on the preconditioner's vectors: single precision
     x0, b = (rng.random(SHAPE).astype(lev.x.dtype) for _ in range(2))
     x = x0.copy()
-    no_dot, one_slab = pressure.NO_DOT, lev.slabs
-    pressure.gauss_seidel(x, b, lev.args(), 0, 1, *no_dot, one_slab)  # one red half sweep
+    no_dot = pressure.NO_DOT
+    pressure.gauss_seidel(x, b, lev.args(), 0, 1, *no_dot)  # one red half sweep
     diag = sum(  # sum_f w_f: the diagonal of A
         np.take(lev.w[a], np.arange(SHAPE[a]) + s, axis=a) for a in range(3) for s in (0, 1)
     )
@@ -109,12 +109,12 @@ def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega
     np.testing.assert_allclose(x, expected, rtol=1e-6, atol=1e-6)  # float32 rounding
     single, multi = x0.copy(), x0.copy()
     for colour in (1, 0, 1, 0):
-        pressure.gauss_seidel(single, b, lev.args(), colour, 1, *no_dot, one_slab)
-    pressure.gauss_seidel(multi, b, lev.args(), 1, 4, *no_dot, one_slab)
+        pressure.gauss_seidel(single, b, lev.args(), colour, 1, *no_dot)
+    pressure.gauss_seidel(multi, b, lev.args(), 1, 4, *no_dot)
     np.testing.assert_array_equal(single, multi)
     # asked for r . x, the same sweeps return it (taken plane by plane as they finish)
     dotted, r = x0.copy(), rng.random(SHAPE)
-    rx = pressure.gauss_seidel(dotted, b, lev.args(), 1, 4, r, np.zeros(SHAPE[0]), one_slab)
+    rx = pressure.gauss_seidel(dotted, b, lev.args(), 1, 4, r, np.zeros(SHAPE[0]))
     np.testing.assert_array_equal(dotted, multi)
     assert rx == pytest.approx(float(np.sum(r * multi)), rel=1e-13)
 
@@ -124,9 +124,9 @@ def test_gauss_seidel_fast_path_and_multi_sweep_calls_solve_the_same_cells(omega
 def test_sweeping_by_slabs_gives_the_bits_of_the_plain_sweeps(periodic, halves):
     """The slabs' wavefronts and seams update every cell from the same neighbour values
     as the half sweeps one after the other: the same bits, and the same r . x, in the
-    serial and the parallel version, with a body cut by a seam; a periodic axis of an
-    odd number of planes, where the wavefront does not apply, falls back to the plain
-    sweeps."""
+    serial and the parallel version, with a body cut by a seam. It does not apply to
+    slabs too thin for the half sweeps, nor to a periodic axis of an odd number of
+    planes."""
     shape = (22, 8, 12)
     rng = np.random.default_rng(5)
     lev = _level(rng, periodic, shape=shape)
@@ -136,14 +136,13 @@ def test_sweeping_by_slabs_gives_the_bits_of_the_plain_sweeps(periodic, halves):
     r = rng.random(shape)
     slabs = pressure.slab_bounds(shape[0], 7)
     np.testing.assert_array_equal(slabs, [0, 7, 14, 22])
-    assert pressure._wavefront_fits(slabs, halves, periodic[0])
-    assert not pressure._wavefront_fits(slabs, 5, periodic[0])  # 7 < 2 x 5 - 1 planes
-    assert not pressure._wavefront_fits(np.array([0, 7, 14, 21]), 1, True)  # odd, periodic
+    assert pressure.wavefront_fits(slabs, halves, periodic[0])
+    assert not pressure.wavefront_fits(slabs, 5, periodic[0])  # 7 < 2 x 5 - 1 planes
+    assert not pressure.wavefront_fits(np.array([0, 7, 14, 21]), 1, True)  # odd, periodic
+    assert not pressure.wavefront_fits(lev.slabs, 1, False)  # a small level: one slab
     plain = x0.copy()
-    expected = pressure.gauss_seidel.serial(
-        plain, b, lev.args(), 1, halves, r, np.zeros(shape[0]), lev.slabs
-    )
-    for version in (pressure.gauss_seidel.serial, pressure.gauss_seidel.parallel):
+    expected = pressure.gauss_seidel.serial(plain, b, lev.args(), 1, halves, r, np.zeros(22))
+    for version in (pressure.smooth_by_slabs.serial, pressure.smooth_by_slabs.parallel):
         x = x0.copy()
         rx = version(x, b, lev.args(), 1, halves, r, np.zeros(shape[0]), slabs)
         np.testing.assert_array_equal(x, plain)

@@ -23,8 +23,8 @@ The first coarse levels correct twice (a W, ``W_LEVELS``), the others once (a V)
 cycle runs in single precision (``PRECONDITIONER_DTYPE``), CG in double. The levels below
 ``SERIAL_CELLS`` cells run as one compiled call on flat tables (:mod:`.coarse_levels`);
 those below ``threads.PARALLEL_CELLS`` use the kernels' serial versions (:mod:`.threads`),
-the others smooth slab by slab in a wavefront (:func:`gauss_seidel`: the same numbers in
-two parallel loops instead of one per half sweep).
+the others smooth slab by slab in a wavefront (:func:`smooth_by_slabs`: the same numbers
+in two parallel loops instead of one per half sweep).
 
 The kernels work row by row along z, with each row classified once per weight change
 (:func:`classify_rows`): ALL_OPEN rows use the constant 7-point stencil, ROW_CONSTANT rows
@@ -54,7 +54,7 @@ from windbench.wind.navier_stokes.threads import PARALLEL_CELLS, select, threade
 SERIAL_CELLS = 32768  # levels with fewer cells run on one thread (:mod:`.coarse_levels`)
 PRE_SWEEPS = 2  # per level and direction
 # Planes per slab of the smoother on the levels in the kernels' parallel versions
-# (:func:`gauss_seidel`; at least 2 (2 PRE_SWEEPS) - 1): 128 KB per float32 field and
+# (:func:`smooth_by_slabs`; at least 2 (2 PRE_SWEEPS) - 1): 128 KB per float32 field and
 # slab at 64^3.
 SLAB_PLANES = 8
 # Levels whose coarse-grid correction is two cycles of the next level (a W on the first
@@ -385,21 +385,14 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
 
 
 @threaded(fastmath=FAST_MATH)
-def gauss_seidel(x, b, level, colour, halves, r, partial, slabs):
+def gauss_seidel(x, b, level, colour, halves, r, partial):
     """``halves`` half sweeps of red-black SOR (the level's omega, coef[6]) on A x = b,
-    alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first): a
-    cycle's smoothing on one level is one call (the Python loop of one call per half
-    sweep cost about 2 ms per step at 64^3, measured with cProfile).
+    alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first), planes
+    in parallel: a cycle's smoothing on one level is one call (the Python loop of one call
+    per half sweep cost about 2 ms per step at 64^3, measured with cProfile).
 
-    With ``slabs`` (:func:`slab_bounds`) of at least 2 halves - 1 planes each, in two
-    parallel loops (:func:`_slab_wavefront`, then :func:`_seam`) instead of one per half
-    sweep: the same updates from the same neighbour values as the plain sweeps, so the
-    same bits, with one wake-up of the threads less per half sweep beyond the first two
-    (60-80 microseconds each under the passive wait, :mod:`windbench.runtime`) and each
-    plane swept while it is in the cache. Otherwise the half sweeps one after the other,
-    planes in parallel; on a periodic x axis with an odd number of planes the last plane
-    neighbours the first one in the same colour and is done after the parallel loop (no
-    race, bit-reproducible).
+    On a periodic x axis with an odd number of planes the last plane neighbours the first
+    one in the same colour: it is done after the parallel loop (no race, bit-reproducible).
 
     With ``partial`` of one entry per plane (else empty): returns r . x after the last
     half sweep, each plane's share taken as soon as that sweep has finished the plane
@@ -408,15 +401,8 @@ def gauss_seidel(x, b, level, colour, halves, r, partial, slabs):
     """
     nx = x.shape[0]
     periodic = level[3]
-    with_dot = partial.shape[0] == nx
-    if _wavefront_fits(slabs, halves, periodic[0]):
-        n_slabs = slabs.shape[0] - 1
-        for s in prange(n_slabs):
-            _slab_wavefront(x, b, level, colour, halves, r, partial, slabs, np.int64(s))
-        for s in prange(n_slabs):
-            _seam(x, b, level, colour, halves, r, partial, slabs, np.int64(s))
-        return ordered_sum(partial) if with_dot else 0.0
     last = nx - 1 if (periodic[0] and nx % 2 == 1 and nx > 1) else nx
+    with_dot = partial.shape[0] == nx
     for half in range(halves):
         c = (colour + half) % 2
         final = with_dot and half == halves - 1
@@ -431,18 +417,31 @@ def gauss_seidel(x, b, level, colour, halves, r, partial, slabs):
     return ordered_sum(partial) if with_dot else 0.0
 
 
-@njit(cache=True)
-def _wavefront_fits(slabs, halves, periodic_x):
-    """Whether :func:`gauss_seidel` can sweep by slabs: more than one slab, each of at
-    least 2 halves - 1 planes (the seams' wedges then neither meet nor read each other's
-    planes), and no periodic x axis of an odd number of planes."""
+@threaded(fastmath=FAST_MATH)
+def smooth_by_slabs(x, b, level, colour, halves, r, partial, slabs):
+    """:func:`gauss_seidel` slab by slab (``slabs``: :func:`slab_bounds`, where
+    :func:`wavefront_fits`): a wavefront over each slab (:func:`_slab_wavefront`), then
+    the wedges around the seams between slabs (:func:`_seam`), two parallel loops instead
+    of one per half sweep. Every cell is updated from the same neighbour values as in the
+    half sweeps one after the other, so the same bits, with one wake-up of the threads
+    less per half sweep beyond the second (60-80 microseconds each under the passive
+    wait, :mod:`windbench.runtime`) and each plane swept while it is in the cache."""
     n_slabs = slabs.shape[0] - 1
-    if n_slabs < 2 or (periodic_x and slabs[n_slabs] % 2 == 1):
-        return False
-    for s in range(n_slabs):
-        if slabs[s + 1] - slabs[s] < 2 * halves - 1:
-            return False
-    return True
+    for s in prange(n_slabs):
+        _slab_wavefront(x, b, level, colour, halves, r, partial, slabs, np.int64(s))
+    for s in prange(n_slabs):
+        _seam(x, b, level, colour, halves, r, partial, slabs, np.int64(s))
+    return ordered_sum(partial) if partial.shape[0] == x.shape[0] else 0.0
+
+
+def wavefront_fits(slabs: np.ndarray, halves: int, periodic_x: bool) -> bool:
+    """Whether :func:`smooth_by_slabs` can take ``halves`` half sweeps on ``slabs``: more
+    than one slab, each of at least 2 halves - 1 planes (the seams' wedges then neither
+    meet nor read each other's planes), and no periodic x axis of an odd number of
+    planes."""
+    sizes = np.diff(slabs)
+    odd_wrap = bool(periodic_x) and int(slabs[-1]) % 2 == 1
+    return len(sizes) > 1 and not odd_wrap and int(sizes.min()) >= 2 * halves - 1
 
 
 @njit(cache=True)
@@ -502,7 +501,7 @@ def _seam(x, b, level, colour, halves, r, partial, slabs, s):
 
 
 def slab_bounds(planes: int, per_slab: int) -> np.ndarray:
-    """The first plane of each slab of :func:`gauss_seidel`, then ``planes``: slabs of
+    """The first plane of each slab of :func:`smooth_by_slabs`, then ``planes``: slabs of
     about ``per_slab`` planes (at least that many where there are two or more), as equal
     as they can be; one slab if per_slab <= 0."""
     count = 1 if per_slab <= 0 else max(1, planes // per_slab)
@@ -711,7 +710,7 @@ class _Level:
         # small levels run in one compiled call per visit (:mod:`.coarse_levels`)
         self.small = np.prod(self.shape) < SERIAL_CELLS
         self.partial = np.zeros(nx)  # per-plane sums of the smoother's dot
-        # the smoother's slabs (gauss_seidel): on the levels in the parallel versions
+        # the smoother's slabs (smooth_by_slabs): on the levels in the parallel versions
         on_threads = self.cells >= PARALLEL_CELLS
         self.slabs = slab_bounds(nx, SLAB_PLANES if on_threads else 0)
 
@@ -728,11 +727,14 @@ class _Level:
 
     def smooth(self, x, b, sweeps, reverse, r=None) -> float:
         """``sweeps`` red-black sweeps, black first if ``reverse`` (one kernel call); with
-        ``r`` (float64, the level's shape) returns r . x after them (:func:`gauss_seidel`)."""
+        ``r`` (float64, the level's shape) returns r . x after them (:func:`gauss_seidel`,
+        or :func:`smooth_by_slabs` where the level's slabs allow it)."""
         r, partial = NO_DOT if r is None else (r, self.partial)
-        smoother = gauss_seidel.on(self.cells)
-        colour = 1 if reverse else 0
-        return smoother(x, b, self.args(), colour, 2 * sweeps, r, partial, self.slabs)
+        colour, halves = (1 if reverse else 0), 2 * sweeps
+        if wavefront_fits(self.slabs, halves, self.periodic[0]):
+            smoother = smooth_by_slabs.on(self.cells)
+            return smoother(x, b, self.args(), colour, halves, r, partial, self.slabs)
+        return gauss_seidel.on(self.cells)(x, b, self.args(), colour, halves, r, partial)
 
 
 class MultigridPoisson:
