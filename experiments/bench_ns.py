@@ -5,7 +5,7 @@ step of ``../shared/baselines/nb_fluid.py`` (``--solver mgpcg --pdtype f64``) me
 the same run.
 
     PYTHONPATH=. python experiments/bench_ns.py [--resolutions 64 128] [--steps 10]
-        [--precisions float64 float32] [--advection semi_lagrangian second_order]
+        [--rounds 2] [--precisions float64 float32] [--advection semi_lagrangian second_order]
         [--no-baseline] [--set "KEY=VALUE ..." ...] [--out CSV]
     PYTHONPATH=. python experiments/bench_ns.py --validation
 
@@ -18,8 +18,12 @@ spinning threads start each parallel loop sooner) and ``baseline_passive_seconds
 this process runs under; the two differ most on small grids). ``--set`` adds variants of
 further overrides (column ``overrides``; ``""``: none). The variants of one resolution
 are stepped in turn (A, B, A, B, ...), so that a change in the machine's load hits them
-alike; the load average (``uptime``) is printed and recorded, since the machine's 2
-cores are shared. ``setup_seconds``
+alike, and the steps are split into ``--rounds`` rounds, each followed by one run of the
+baseline each way: the baseline figures are the medians of those runs (each run's in
+``baseline_rounds`` and ``baseline_passive_rounds``), so that a drift of the machine's
+speed over the minutes of a run (the same step took 28 to 40 ms at 64^3 within an hour
+here) hits windbench and the baseline alike. The load average (``uptime``) is printed
+and recorded, since the machine's 2 cores are shared. ``setup_seconds``
 (backend construction, incl. loading or compiling the numba kernels) and
 ``first_step_seconds`` are reported separately; run the script twice to see cached-compile
 figures (numba cache=True).
@@ -160,17 +164,24 @@ def bench(resolution: int, args) -> list[dict]:
         Variant(resolution, p, a, args.turbulence, tuple(o.split()))
         for p, a, o in product(args.precisions, args.advection, args.set)
     ]
-    for _ in range(args.steps):  # in turn: the load hits every variant alike
-        for v in variants:
-            v.step()
+    bases = {"": [], "_passive": []}
+    per_round = -(-args.steps // args.rounds)
+    for done in range(0, args.steps, per_round):
+        for _ in range(min(per_round, args.steps - done)):  # in turn: the load hits all alike
+            for v in variants:
+                v.step()
+        for as_shipped, suffix in ((True, ""), (False, "_passive")):
+            if args.baselines:
+                bases[suffix].append(baseline(resolution, args.baselines, as_shipped))
     load = os.getloadavg()[0]
     rows = [{**v.row(), "load_average_1min": load} for v in variants]
     del variants
-    for as_shipped, suffix in ((True, ""), (False, "_passive")):
-        base = baseline(resolution, args.baselines, as_shipped) if args.baselines else np.nan
+    for suffix, times in bases.items():
+        base = float(np.median(times)) if times else np.nan
         for row in rows:
             row[f"baseline{suffix}_seconds"] = base
             row[f"ratio_to_baseline{suffix}"] = row["step_seconds"] / base
+            row[f"baseline{suffix}_rounds"] = " ".join(f"{t:.4f}" for t in times)
     for row in rows:
         row["load_average_after_baseline"] = os.getloadavg()[0]
     return rows
@@ -202,6 +213,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--resolutions", type=int, nargs="+", default=[16, 32, 64, 128])
     ap.add_argument("--steps", type=int, default=10)
+    ap.add_argument("--rounds", type=int, default=2, help="baseline runs between the steps")
     ap.add_argument("--precisions", nargs="+", default=["float64", "float32"])
     ap.add_argument("--advection", nargs="+", default=["semi_lagrangian"])
     ap.add_argument("--turbulence", default=None, help="wind.turbulence (default: the config's)")
