@@ -1003,7 +1003,7 @@ def _unfold(sc, inv_mass, p, rows):
     Taubin 1995): C = x_k - (1/n) sum_j x_j = 0, projected with the inverse masses w as a
     position constraint, lam = -C / (w_k + sum_j w_j / n^2), dx_k = w_k lam, dx_j =
     -(w_j / n) lam (momentum kept). It opens a crumple of a few triangles folded tighter
-    than the thickness, whose apex poke through each other's fans so that taking one
+    than the thickness, whose apexes poke through each other's fans so that taking one
     apex back pushes its neighbours through."""
     q = p.copy()
     done = np.zeros(p.shape[0], np.bool_)
