@@ -47,9 +47,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from windbench.wind.navier_stokes import threads
 from windbench.wind.navier_stokes.coarse_levels import CoarseLevels
 from windbench.wind.navier_stokes.flags import FAST_MATH
-from windbench.wind.navier_stokes.threads import PARALLEL_CELLS, select, threaded
+from windbench.wind.navier_stokes.threads import select, threaded
 
 SERIAL_CELLS = 32768  # levels with fewer cells run on one thread (:mod:`.coarse_levels`)
 PRE_SWEEPS = 2  # per level and direction
@@ -711,7 +712,7 @@ class _Level:
         self.small = np.prod(self.shape) < SERIAL_CELLS
         self.partial = np.zeros(nx)  # per-plane sums of the smoother's dot
         # the smoother's slabs (smooth_by_slabs): on the levels in the parallel versions
-        on_threads = self.cells >= PARALLEL_CELLS
+        on_threads = self.cells >= threads.PARALLEL_CELLS
         self.slabs = slab_bounds(nx, SLAB_PLANES if on_threads else 0)
 
     def args(self) -> Stencil:
