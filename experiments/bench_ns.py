@@ -228,6 +228,8 @@ def main():
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--validation", action="store_true", help="the errors, not the timings")
     args = ap.parse_args()
+    if args.rounds < 1 or args.steps < 1:
+        ap.error(f"--steps and --rounds must be >= 1, got {args.steps} and {args.rounds}")
     if args.validation:
         df = validation()
         print(df.to_string())

@@ -436,9 +436,10 @@ def test_untangling_two_free_triangles_keeps_their_momentum():
     assert self_intersections(sc, p) == 0
 
 
-# A crumple from a shirt run (10 vertices, in units of 10 um, about their centroid): the
-# fan of vertex 4 folded tighter than the thickness (edges 13-19 mm), so that the apex of
-# triangle (0, 4, 5) and that of (4, 3, 8) poke through each other's fans.
+# A crumple from a shirt run (10 vertices, in units of 10 um, about their centroid; edges
+# 2-19 mm, thickness 5 mm): triangles (4, 2, 3) and (0, 5, 1) cross, edge 4-2 through the
+# second and edge 0-5 through the first, and vertices 4 and 5, the shallower ends, are
+# neighbours whose fans are folded through each other.
 CRUMPLE = 1e-5 * np.array([
     [-252, -869, -578], [261, -317, 535], [857, -1486, -409], [744, -125, -1187],
     [-309, -164, 175], [297, 158, -51], [-545, 517, 806], [69, 1010, 368],
@@ -451,10 +452,10 @@ CRUMPLE_TRIANGLES = np.array([
 
 
 def test_a_crumple_whose_apexes_poke_through_each_other_is_opened():
-    """No edge taken back alone or with the others leaves fewer crossings here (each
-    apex's neighbours lie on both sides of the other fan); pulling the apexes into their
-    rings does: no pair crosses after, a brute-force search agrees, momentum is kept (equal
-    masses), and each apex moved less than the fold's edges are long."""
+    """No edge taken back alone or with the others leaves fewer crossings here (taking
+    vertex 4 or 5 back pushes its neighbours through); pulling both into their rings
+    does: no pair crosses after, a brute-force search agrees, momentum is kept (equal
+    masses), and no vertex moved more than 13 mm."""
     p = CRUMPLE.copy()
     sc = self_contact_model(p, CRUMPLE_TRIANGLES, 0.005)
     assert _brute_force_crossings(CRUMPLE_TRIANGLES, p) == 1
