@@ -984,15 +984,14 @@ def untangle(sc, inv_mass, p, fit):
 def _one_edge(sc, inv_mass, p, fit, rows):
     """(1, crossing edges after) for the first of the crossing edges ``rows`` (in their
     order) whose move alone, to the thickness or to a tenth of it, leaves fewer crossing
-    edges; (0, rows) and ``p`` unchanged when none does."""
-    before = p.copy()
+    edges; (0, rows) and ``p`` unchanged when none does (:func:`_kept_if_fewer`)."""
     for r in range(rows.shape[0]):
         for clearance in (1.0, 0.1):
-            if _take_back(sc, inv_mass, p, rows, r, clearance):
-                after = _crossing_edges(sc, p, fit)
-                if after.shape[0] < rows.shape[0]:
-                    return 1, after
-                copy_rows(p, before, p.shape[0])
+            q = p.copy()
+            if _take_back(sc, inv_mass, q, rows, r, clearance):
+                kept, after = _kept_if_fewer(sc, p, fit, rows, q)
+                if kept:
+                    return kept, after
     return 0, rows
 
 
