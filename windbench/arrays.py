@@ -1,4 +1,5 @@
-"""Array copies and the cross product for compiled kernels, written as loops.
+"""Array copies, the cross product and the largest row distance for compiled kernels,
+written as loops.
 
 numba compiles three common array operations with an error path that formats its
 message at run time, and the string machinery behind it is compiled once per process on
@@ -11,6 +12,8 @@ is computed by the same operations in the same order.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -39,3 +42,13 @@ def cross(a, b):
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
     return out
+
+
+@njit(cache=True)
+def largest_move(p, q):
+    """max_i |p_i - q_i| (m) of two (n, 3) arrays."""
+    d2 = 0.0
+    for i in range(p.shape[0]):
+        dx, dy, dz = p[i, 0] - q[i, 0], p[i, 1] - q[i, 1], p[i, 2] - q[i, 2]
+        d2 = max(d2, dx * dx + dy * dy + dz * dz)
+    return math.sqrt(d2)

@@ -267,30 +267,30 @@ def _attached(inv_mass, prims, e, corners):
 
 
 @njit(cache=True)
-def surface_contacts(contacts, inv_mass, edges, triangles, p, clear):
+def surface_contacts(contacts, inv_mass, edges, triangles, p, clear, near):
     """Every edge, then every triangle, that may touch a body pushed out to the margin
-    (:func:`project_edge`, :func:`project_triangle`); ``clear`` the vertex contacts'
+    (:func:`project_edge`, :func:`project_triangle`), of those ``near`` holds
+    (:mod:`~windbench.cloth.near_bodies`, held at ``p``); ``clear`` the vertex contacts'
     clearances (module docstring: skipping)."""
     normal, beta = np.empty(3), np.empty(2)
-    near = _near_ones(contacts.boxes, inv_mass, p, edges)
-    for e in near:
+    for e in _near_ones(contacts.boxes, p, edges, near.edges, near.counts[1]):
         _near_edge(contacts, inv_mass, p, edges[e], clear, normal, beta)
-    near = _near_ones(contacts.boxes, inv_mass, p, triangles)
-    for f in near:
+    for f in _near_ones(contacts.boxes, p, triangles, near.triangles, near.counts[2]):
         _near_triangle(contacts, inv_mass, p, triangles[f], clear, normal)
 
 
 @njit(cache=True)
-def _near_ones(boxes, inv_mass, p, prims):
-    """The edges or triangles (rows of 2 or 3 corners) without a pinned corner whose box
+def _near_ones(boxes, p, prims, held, n_held):
+    """Of the edges or triangles (rows of 2 or 3 corners) ``held[:n_held]``, those whose box
     meets a body's grown box. A loop of its own: with the contact calls in the same loop
     numba keeps reference counts inside it, 20 times the cost of the box tests. The corner
     count is read from ``prims``, not passed: a literal 2 or 3 compiled it twice."""
     corners = prims.shape[1]
-    out = np.empty(prims.shape[0], np.int64)
+    out = np.empty(n_held, np.int64)
     found = 0
-    for e in range(prims.shape[0]):
-        if not _attached(inv_mass, prims, e, corners) and _near_a_box(boxes, p, prims, e, corners):
+    for q in range(n_held):
+        e = held[q]
+        if _near_a_box(boxes, p, prims, e, corners):
             out[found] = e
             found += 1
     return out[:found]

@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from windbench.arrays import copy_rows
+from windbench.arrays import copy_rows, largest_move
 
 LEAF = 4  # triangles per leaf patch at most
 REACH = 4.0  # a vertex this many thicknesses behind a triangle is brought back
@@ -704,16 +704,6 @@ def self_contacts(sc, inv_mass, p, x0, fit):
         i, j, k, l = edges[e, 0], edges[e, 1], edges[g, 0], edges[g, 1]
         pushed += push_edges(p, x0, inv_mass, i, j, k, l, thickness, moves) < 0.0
     return pushed
-
-
-@njit(cache=True)
-def largest_move(p, q):
-    """max_i |p_i - q_i| (m)."""
-    d2 = 0.0
-    for i in range(p.shape[0]):
-        dx, dy, dz = p[i, 0] - q[i, 0], p[i, 1] - q[i, 1], p[i, 2] - q[i, 2]
-        d2 = max(d2, dx * dx + dy * dy + dz * dz)
-    return math.sqrt(d2)
 
 
 @njit(cache=True)

@@ -70,6 +70,7 @@ from windbench.cloth.constraints import (
 )
 from windbench.cloth.edge_contact import surface_boxes, surface_contacts, surface_penetration
 from windbench.cloth.model import ClothModel, ClothState
+from windbench.cloth.near_bodies import NearBodies, hold_near, near_bodies
 from windbench.cloth.self_contact import (
     SelfContact,
     TreeFit,
@@ -186,12 +187,31 @@ def _distance_passes(c, frame, iterations, p, lam, chain_work):
 
 
 @njit(cache=True)
-def _contacts(contacts, inv_mass, p, xp, normal, clear):
+def _hold_near(model, p, near):
+    """The parts of the cloth that may touch a body, held at ``p``
+    (:func:`~windbench.cloth.near_bodies.hold_near`)."""
+    c = model.constraints
+    hold_near(
+        model.contacts.boxes,
+        model.surface.boxes,
+        c.inv_mass,
+        c.edges,
+        model.self_contact.triangles,
+        p,
+        near,
+    )
+
+
+@njit(cache=True)
+def _contacts(model, p, xp, normal, clear, near):
     """Step 3: every free vertex that may touch a body moved out to the margin
     (:func:`~windbench.cloth.collision.contact_vertex`, friction against its motion from
-    xp; ``normal`` (3,) work space, ``clear`` the clearances)."""
-    for i in range(p.shape[0]):  # the box test in scalars first: no array views
-        if inv_mass[i] > 0.0 and near_a_body(contacts.boxes, p[i, 0], p[i, 1], p[i, 2]):
+    xp; ``normal`` (3,) work space, ``clear`` the clearances), of those ``near`` holds."""
+    _hold_near(model, p, near)
+    contacts = model.contacts
+    for q in range(near.counts[0]):  # the box test in scalars first: no array views
+        i = near.vertices[q]
+        if near_a_body(contacts.boxes, p[i, 0], p[i, 1], p[i, 2]):
             contact_vertex(contacts, i, xp[i], p[i], normal, clear)
 
 
@@ -215,7 +235,7 @@ def _frame_end(model, fit, p):
 
 
 @njit(cache=True)
-def _all_contacts(model, p, xp, normal, clear, fit, last):
+def _all_contacts(model, p, xp, normal, clear, near, fit, last):
     """Step 3: the cloth's edges and triangles
     (:func:`~windbench.cloth.edge_contact.surface_contacts`) and its vertices
     (:func:`_contacts`) against the bodies, then the cloth against itself and the other
@@ -227,8 +247,10 @@ def _all_contacts(model, p, xp, normal, clear, fit, last):
     most the thickness, until the next contact pass)."""
     c = model.constraints
     if model.contacts.bodies.kinds.shape[0] > 0:
-        surface_contacts(model.surface, c.inv_mass, c.edges, model.self_contact.triangles, p, clear)
-        _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
+        _hold_near(model, p, near)
+        tris = model.self_contact.triangles
+        surface_contacts(model.surface, c.inv_mass, c.edges, tris, p, clear, near)
+        _contacts(model, p, xp, normal, clear, near)
     if fit is not None:  # None without cloth.self_collision: the branch is not compiled
         self_contact_substep(model.self_contact, c.inv_mass, p, xp, fit, last)
 
@@ -259,7 +281,7 @@ def _strain_limit(model, frame, p, xp, work, normal):
     where the wind presses it on the body its largest stretch stays above the limit, by as
     much as ``max_stretch`` and ``over_strain_limit`` (:meth:`XPBDCloth.stretch`) record."""
     c, s = model.constraints, model.settings
-    _, lam, chain_work, moved, clear, stamps, _ = work
+    _, lam, chain_work, moved, clear, stamps, near, _ = work
     stamps[1][:] = -1  # every edge is tested in the first pass
     has_bodies = model.contacts.bodies.kinds.shape[0] > 0
     ptr = c.chain_ptr[: c.n_lattice_chains + 1]
@@ -290,7 +312,7 @@ def _strain_limit(model, frame, p, xp, work, normal):
         if solved + edges == 0:  # every thread and edge kept it: nothing moved
             break
         if has_bodies and solved > 0:  # the contacts again, so that they hold at the end
-            _contacts(model.contacts, c.inv_mass, p, xp, normal, clear)
+            _contacts(model, p, xp, normal, clear, near)
     if has_bodies and c.n_stretch > c.n_lattice:
         _contacts_moved(model.contacts, c.inv_mass, p, xp, normal, clear, moved)
 
@@ -316,14 +338,14 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
 
     Inputs x, v, f_ext (n, 3); outputs ``out`` = (x_out, v_out); ``work`` = the
     :class:`Workspace` arrays in field order (x scratch (n, 3), multipliers (E,), chain
-    scratch (S, 5), strain-limit flags, contact clearances, strain-limit clocks, patch
-    fit). Returns (W, K, finite) of :func:`_frame_figures` for the new state.
+    scratch (S, 5), strain-limit flags, contact clearances, strain-limit clocks, parts
+    near the bodies, patch fit). Returns (W, K, finite) of :func:`_frame_figures` for the new state.
     """
     c, s = model.constraints, model.settings
     h = frame.dt / s.substeps
     inv_h = 1.0 / h
     p, vv = out
-    xp, lam, chain_work, _, clear, _, fit = work
+    xp, lam, chain_work, _, clear, _, near, fit = work
     copy_rows(xp, x, x.shape[0])
     copy_rows(vv, v, v.shape[0])
     normal = np.empty(3)
@@ -338,7 +360,7 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
         if (sub + 1) % frame.bend_every == 0:  # 2b. soft bending: every bend_every-th
             project_hinges(p, c.inv_mass, c.hinges, c.hinge_rest, frame.hinge_alpha)
         project_tethers(p, c.inv_mass, c.tether_anchor, c.tether_length)  # 2c.
-        _all_contacts(model, p, xp, normal, clear, fit, sub == s.substeps - 1)  # 3.
+        _all_contacts(model, p, xp, normal, clear, near, fit, sub == s.substeps - 1)  # 3.
         _strain_limit(model, frame, p, xp, work, normal)  # 3b.
         for i in range(x.shape[0]):  # 4. v = (p - x)/h ; x = p
             for k in range(3):
@@ -602,6 +624,7 @@ class Workspace:
     moved: np.ndarray  # (n,) bool: vertices the edge-by-edge strain limit moved
     clear: tuple  # contact clearances: probe (n, 3), clearance (n,)
     stamps: tuple  # the strain limit's clocks (limit_edges): per vertex, per edge, clock (1,)
+    near: NearBodies  # the parts of the cloth that may touch a body
     fit: TreeFit | None  # the self-contacts' patch boxes and cones (None: self-collision off)
     frame: FrameConstants | None = None
 
@@ -672,6 +695,7 @@ class XPBDCloth:
                 np.full(n_e, -1, np.int64),
                 np.zeros(1, np.int64),
             ),
+            near_bodies(model.n_vertices, n_e, self.tables.self_contact.triangles.shape[0]),
             tree_fit(self.tables.self_contact, model.n_vertices) if s.self_collision else None,
         )
 
@@ -709,7 +733,7 @@ class XPBDCloth:
             v,
             f,
             out,
-            (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps, w.fit),
+            (w.x, w.lam, w.chain, w.moved, w.clear, w.stamps, w.near, w.fit),
         )
         frames = state.frames + 1
         if not finite:
@@ -740,7 +764,7 @@ class XPBDCloth:
         x = np.ascontiguousarray(positions, dtype=np.float64)
         p, clear = x.copy(), tuple(a.copy() for a in self.workspace.clear)
         start = time.perf_counter()
-        _all_contacts(self.tables, p, x, np.empty(3), clear, None, False)
+        _all_contacts(self.tables, p, x, np.empty(3), clear, self.workspace.near, None, False)
         held = (time.perf_counter() - start) * self.settings.substeps
         fit = self.workspace.fit
         if fit is not None:
