@@ -246,6 +246,28 @@ def test_a_flat_sheet_needs_no_leaf_tests_and_a_folded_one_does():
     assert any((a in lower and b in upper) or (a in upper and b in lower) for a, b in pairs[:found])
 
 
+def test_diagonal_bounds_drop_leaf_pairs_of_a_tilted_sheet_and_no_close_pair():
+    """A sheet whose normal is (1, 1, 1) / sqrt 3: the boxes of patches a leaf apart
+    overlap more than the patches come near. The 18-DOP search tests a strict subset of
+    the leaf pairs the boxes alone would (diagonal bounds left open) and finds the same
+    close pairs; that these are an all-pairs search's is the next test's business."""
+    u, v = (np.sqrt(0.5), -np.sqrt(0.5), 0.0), tuple(np.array([1.0, 1.0, -2.0]) / np.sqrt(6.0))
+    model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 1.0, 17, u=u, v=v)])
+    sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
+    x = model.rest_positions.copy()
+    fit = tree_fit(sc, x.shape[0])
+    refit(sc.tree, sc.triangles, x, fit)
+    pairs, found = leaf_pairs(sc.tree, sc.triangles, fit, _NEVER_FLAT, 0.02)
+    with_dop = {tuple(q) for q in pairs[:found]}
+    close = close_pairs(sc, x, fit.box, pairs, found, 0.02)
+    fit.dop[:, :6], fit.dop[:, 6:] = -np.inf, np.inf  # the diagonal bounds left open
+    pairs, found = leaf_pairs(sc.tree, sc.triangles, fit, _NEVER_FLAT, 0.02)
+    boxes_only = {tuple(q) for q in pairs[:found]}
+    assert with_dop < boxes_only
+    for a, b in zip(close, close_pairs(sc, x, fit.box, pairs, found, 0.02), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_the_close_pair_search_meets_each_pair_once_as_an_all_pairs_search_does(seed):
     """Without the cone culling, the vertex-triangle and edge-edge pairs found through the

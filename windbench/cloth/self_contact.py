@@ -22,9 +22,10 @@ n = e1 x e2).
 
 Broad phase (:func:`leaf_pairs`): a fixed hierarchy of triangle patches
 (:func:`patch_tree`: median splits of the rest-pose centroids, leaves of at most LEAF
-triangles) whose boxes and normal cones are refitted every substep (:func:`refit`). A
-patch is tested against itself only when it is not flat, two patches only when their boxes
-come within the reach and they are not one flat patch together. Flat: a connected patch
+triangles) whose bounds (boxes and diagonal bounds: 18-DOPs, as the k-DOP hierarchies of
+[MKE03]) and normal cones are refitted every substep (:func:`refit`). A patch is tested
+against itself only when it is not flat, two patches only when their bounds come within
+the reach and they are not one flat patch together. Flat: a connected patch
 whose normals lie within a cone below 90 degrees is a height field over the plane normal
 to the cone's axis and cannot meet itself (Volino and Magnenat-Thalmann 1994; Provot 1997
 uses the same cones for cloth). Their second condition, that the patch's contour does not
@@ -34,10 +35,9 @@ They use a narrower cone, CONTACT_CONE: within it, two points of the patch withi
 reach of each other lie within reach / cos(CONTACT_CONE) of each other along the surface,
 neighbours that the thickness test would reject anyway.
 
-The figure :func:`self_intersections` counts intersecting triangle pairs (no common vertex,
-an edge of one crossing the other: Moeller-Trumbore) through the same hierarchy by its
-boxes alone, so that it equals an all-pairs search (the cones would miss two adjacent
-patches, within 90 degrees, that cross in a crumpled flag).
+The figure :func:`self_intersections` counts intersecting triangle pairs (Moeller-Trumbore)
+through the same hierarchy by its bounds alone, equal to an all-pairs search (cones would
+miss two adjacent patches, within 90 degrees, that cross in a crumpled flag).
 """
 
 from __future__ import annotations
@@ -59,6 +59,8 @@ _COS_CONTACT = math.cos(CONTACT_CONE)
 _NEVER_FLAT = 2.0  # a cosine no cone reaches: boxes alone (the intersection figure)
 _COS_UNTANGLE = 0.0  # cos 90 degrees: the cones below it cull the untangling's search
 _WIDE = -2.0  # the cosine recorded for a cone of 90 degrees or more
+_SQRT2 = math.sqrt(2.0)
+DOP_SLACK = 1e-9  # m added to the diagonal bounds' gap (:func:`_dops_meet`) against rounding
 
 
 class PatchTree(NamedTuple):
@@ -81,6 +83,8 @@ class PatchTree(NamedTuple):
     leaf_vert: np.ndarray
     edge_ptr: np.ndarray  # (N + 1,)
     leaf_edge: np.ndarray  # (.., 2)
+    corner_ptr: np.ndarray  # (N + 1,) every vertex of leaf k's triangles, once:
+    leaf_corner: np.ndarray  # leaf_corner[corner_ptr[k]:corner_ptr[k + 1]] (its bounds)
     depth: int  # levels below the root
 
 
@@ -101,6 +105,7 @@ class TreeFit(NamedTuple):
 
     normals: np.ndarray  # (m, 3) area-weighted normals 2 A n of the triangles
     box: np.ndarray  # (N, 6) lower and upper corners of each patch's box
+    dop: np.ndarray  # (N, 12) lower and upper bounds of x+y, x-y, x+z, x-z, y+z, y-z
     cone: np.ndarray  # (N, 5): area-weighted normal sum (3), cos and sin of the half-angle
     stamp: np.ndarray  # (n,) vertex marks of the adjacency test
     clock: np.ndarray  # (1,) the last mark
@@ -172,12 +177,13 @@ def patch_tree(rest, triangles) -> PatchTree:
     nodes = nodes or [[0, 0, -1, -1]]  # no cloth: one empty leaf
     first, count, left, right = (np.array(col, np.int64) for col in zip(*nodes, strict=True))
     connected = np.zeros(len(nodes), np.bool_)
-    verts, edges = [], []
+    verts, edges, corners = [], [], []
     owned_vertices, owned_edges = set(), set()
     for k in range(len(nodes) - 1, -1, -1):
         own = tri[order[first[k] : first[k] + count[k]]]
         if left[k] < 0:
             connected[k] = own.shape[0] == 0 or _one_piece(own)
+            corners.append(np.unique(own))
             verts.append(_claim(np.unique(own), owned_vertices))
             pairs = np.sort(own[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
             edges.append(_claim(np.unique(pairs, axis=0), owned_edges).reshape(-1, 2))
@@ -188,10 +194,12 @@ def patch_tree(rest, triangles) -> PatchTree:
                 tri[order[first[b] : first[b] + count[b]]],
             )
             connected[k] = connected[a] and connected[b] and shared.size > 0
+            corners.append(np.zeros(0, np.int64))
             verts.append(np.zeros(0, np.int64))
             edges.append(np.zeros((0, 2), np.int64))
     vert_ptr, leaf_vert = _csr(verts[::-1])
     edge_ptr, leaf_edge = _csr(edges[::-1])
+    corner_ptr, leaf_corner = _csr(corners[::-1])
     return PatchTree(
         order,
         first,
@@ -203,6 +211,8 @@ def patch_tree(rest, triangles) -> PatchTree:
         leaf_vert.astype(np.int64),
         edge_ptr,
         np.ascontiguousarray(leaf_edge.reshape(-1, 2), np.int64),
+        corner_ptr,
+        leaf_corner.astype(np.int64),
         depth,
     )
 
@@ -229,6 +239,7 @@ def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
     return TreeFit(
         np.zeros((sc.triangles.shape[0], 3)),
         np.zeros((nodes, 6)),
+        np.zeros((nodes, 12)),
         np.zeros((nodes, 5)),
         np.zeros(n_vertices, np.int64),
         np.zeros(1, np.int64),
@@ -274,8 +285,9 @@ def refit(tree, triangles, p, fit):
     from their triangles, inner nodes from their children (the nodes in reverse preorder).
     The loops see plain arrays only: a named tuple handed to a helper in a loop costs
     reference counts for each of its arrays on every pass."""
-    normals, box, cone = fit.normals, fit.box, fit.cone
+    normals, box, dop, cone = fit.normals, fit.box, fit.dop, fit.cone
     order, first, count, left, right = tree.order, tree.first, tree.count, tree.left, tree.right
+    ptr, corners = tree.corner_ptr, tree.leaf_corner
     for f in range(triangles.shape[0]):
         a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
         e1x, e1y, e1z = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
@@ -285,34 +297,30 @@ def refit(tree, triangles, p, fit):
         normals[f, 2] = e1x * e2y - e1y * e2x
     for k in range(first.shape[0] - 1, -1, -1):
         if left[k] < 0:
-            _refit_leaf(order, first[k], first[k] + count[k], triangles, p, normals, box, cone, k)
+            _refit_leaf(order, first[k], first[k] + count[k], normals, cone, k)
+            _leaf_bounds(corners, ptr[k], ptr[k + 1], p, box, dop, k)
             continue
         l, r = left[k], right[k]
         for a in range(3):
             box[k, a] = min(box[l, a], box[r, a])
             box[k, 3 + a] = max(box[l, 3 + a], box[r, 3 + a])
             cone[k, a] = cone[l, a] + cone[r, a]
+        for a in range(6):
+            dop[k, a] = min(dop[l, a], dop[r, a])
+            dop[k, 6 + a] = max(dop[l, 6 + a], dop[r, 6 + a])
         cl, sl = _widened(cone[k, 0], cone[k, 1], cone[k, 2], cone, l)
         cr, sr = _widened(cone[k, 0], cone[k, 1], cone[k, 2], cone, r)
         cone[k, 3], cone[k, 4] = (cl, sl) if cl < cr else (cr, sr)
 
 
 @njit(cache=True)
-def _refit_leaf(order, start, stop, triangles, p, normals, box, cone, k):
-    """The box of leaf k's vertices and the cone around the normals of its triangles
-    order[start:stop] (scalars: it runs for every leaf in every substep)."""
-    x0 = y0 = z0 = np.inf
-    x1 = y1 = z1 = -np.inf
+def _refit_leaf(order, start, stop, normals, cone, k):
+    """The cone around the normals of leaf k's triangles order[start:stop] (scalars: it
+    runs for every leaf in every substep)."""
     sx = sy = sz = 0.0
     for j in range(start, stop):
         f = order[j]
         sx, sy, sz = sx + normals[f, 0], sy + normals[f, 1], sz + normals[f, 2]
-        for v in range(3):
-            i = triangles[f, v]
-            x0, x1 = min(x0, p[i, 0]), max(x1, p[i, 0])
-            y0, y1 = min(y0, p[i, 1]), max(y1, p[i, 1])
-            z0, z1 = min(z0, p[i, 2]), max(z1, p[i, 2])
-    box[k, 0], box[k, 1], box[k, 2], box[k, 3], box[k, 4], box[k, 5] = x0, y0, z0, x1, y1, z1
     cone[k, 0], cone[k, 1], cone[k, 2] = sx, sy, sz
     norm = math.sqrt(sx * sx + sy * sy + sz * sz)
     low = 1.0
@@ -327,6 +335,47 @@ def _refit_leaf(order, start, stop, triangles, p, normals, box, cone, k):
     cone[k, 3], cone[k, 4] = (
         (low, math.sqrt(max(0.0, 1.0 - low * low))) if low > 0.0 else (_WIDE, 0.0)
     )
+
+
+@njit(cache=True)
+def _leaf_bounds(corners, start, stop, p, box, dop, k):
+    """The box of leaf k's vertices corners[start:stop] and their bounds along the six
+    diagonal axes of :func:`_dops_meet` (unnormalised: x + y, x - y, x + z, x - z, y + z,
+    y - z), in scalars."""
+    x0 = y0 = z0 = d0 = d1 = d2 = d3 = d4 = d5 = np.inf
+    x1 = y1 = z1 = e0 = e1 = e2 = e3 = e4 = e5 = -np.inf
+    for j in range(start, stop):
+        i = corners[j]
+        x, y, z = p[i, 0], p[i, 1], p[i, 2]
+        x0, x1, y0, y1, z0, z1 = (
+            min(x0, x),
+            max(x1, x),
+            min(y0, y),
+            max(y1, y),
+            min(z0, z),
+            max(z1, z),
+        )
+        d0, e0, d1, e1 = min(d0, x + y), max(e0, x + y), min(d1, x - y), max(e1, x - y)
+        d2, e2, d3, e3 = min(d2, x + z), max(e2, x + z), min(d3, x - z), max(e3, x - z)
+        d4, e4, d5, e5 = min(d4, y + z), max(e4, y + z), min(d5, y - z), max(e5, y - z)
+    box[k, 0], box[k, 1], box[k, 2], box[k, 3], box[k, 4], box[k, 5] = x0, y0, z0, x1, y1, z1
+    dop[k, 0], dop[k, 1], dop[k, 2], dop[k, 3], dop[k, 4], dop[k, 5] = d0, d1, d2, d3, d4, d5
+    dop[k, 6], dop[k, 7], dop[k, 8], dop[k, 9], dop[k, 10], dop[k, 11] = e0, e1, e2, e3, e4, e5
+
+
+@njit(cache=True)
+def _dops_meet(dop, a, b, gap):
+    """Whether patches a and b may come within ``gap`` of each other along the six
+    diagonal axes (1, +-1, 0)/sqrt 2, ... of an 18-DOP (the box's three axes are
+    :func:`_boxes_meet`'s): two points within ``gap`` differ by less than ``gap`` along
+    every unit axis, so by less than sqrt(2) ``gap`` in the unnormalised sums, widened by
+    DOP_SLACK against rounding. A tilted sheet's boxes overlap those of patches two or
+    three leaves away; its diagonal bounds separate about half of them (64 x 64 flag)."""
+    g = _SQRT2 * gap + DOP_SLACK
+    for k in range(6):
+        if dop[a, 6 + k] + g < dop[b, k] or dop[b, 6 + k] + g < dop[a, k]:
+            return False
+    return True
 
 
 @njit(cache=True)
@@ -360,7 +409,14 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
     each other (module docstring): a patch is skipped when it is connected and its cone's
     cosine exceeds ``cos_flat``; two patches when their boxes are more than ``gap`` apart,
     or when they are connected, share a vertex and fit in one such cone together."""
-    box, cone, stack, stamp, clock = fit.box, fit.cone, fit.stack, fit.stamp, fit.clock
+    box, dop, cone, stack, stamp, clock = (
+        fit.box,
+        fit.dop,
+        fit.cone,
+        fit.stack,
+        fit.stamp,
+        fit.clock,
+    )
     order, first, count, left, right = tree.order, tree.first, tree.count, tree.left, tree.right
     connected = tree.connected
     pairs = np.empty((64, 2), np.int64)
@@ -381,7 +437,7 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
                 top += 3
                 continue
         else:
-            if not _boxes_meet(box, a, box, b, gap):
+            if not _boxes_meet(box, a, box, b, gap) or not _dops_meet(dop, a, b, gap):
                 continue
             if (
                 connected[a]
