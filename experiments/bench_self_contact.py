@@ -5,7 +5,7 @@ The flag runs with ``cloth.self_collision=true`` for ``--warmup`` frames, then
 every substep that moved far enough, and a second pass after one that pushed a pair).
 On the last frame's positions each phase of one pass (at the base reach, REACH
 thicknesses) is timed alone, the median of ``--repeats`` calls: the refit of the patch
-boxes and cones, the leaf-pair search (``leaf_pairs``), the close-pair search
+bounds and cones, the leaf-pair search (``leaf_pairs``), the close-pair search
 (``close_pairs``: vertex-triangle, then edge-edge) and the whole pass
 (``self_contacts``, on a copy), with the counts each one hands on. A leaf pair whose two
 patches' triangles keep their normals within the contact cone (60 degrees) of their mean
@@ -130,7 +130,7 @@ def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
     ms_refit, _ = median_ms(sc_kernels.refit, tree, tri, x, fit, repeats=repeats)
     cos = sc_kernels._COS_CONTACT
     ms_pairs, (pairs, found) = median_ms(
-        sc_kernels.leaf_pairs, tree, tri, fit, cos, reach, repeats=repeats
+        sc_kernels.leaf_pairs, tree, fit, cos, reach, repeats=repeats
     )
     ms_close, (vt, ee) = median_ms(
         sc_kernels.close_pairs, sc, x, fit.box, pairs, found, reach, repeats=repeats

@@ -15,6 +15,7 @@ from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.self_contact import (
     _NEVER_FLAT,
     LEAF,
+    _adjacent,
     _edges_close,
     _vertex_near_triangle,
     close_pairs,
@@ -227,12 +228,12 @@ def test_a_flat_sheet_needs_no_leaf_tests_and_a_folded_one_does():
     x = model.rest_positions.copy()
     fit = tree_fit(sc, x.shape[0])
     refit(sc.tree, sc.triangles, x, fit)
-    assert leaf_pairs(sc.tree, sc.triangles, fit, 0.5, 0.02)[1] == 0
+    assert leaf_pairs(sc.tree, fit, 0.5, 0.02)[1] == 0
     upper = x[:, 1] > 0.5
     x[upper, 1] = 1.0 - x[upper, 1]
     x[upper, 2] = 0.002 + 0.001 * (x[upper, 1] < 0.49)
     refit(sc.tree, sc.triangles, x, fit)
-    pairs, found = leaf_pairs(sc.tree, sc.triangles, fit, 0.5, 0.02)
+    pairs, found = leaf_pairs(sc.tree, fit, 0.5, 0.02)
     assert found > 0
     leaves = np.flatnonzero(sc.tree.left < 0)
     corners = {
@@ -257,11 +258,11 @@ def test_diagonal_bounds_drop_leaf_pairs_of_a_tilted_sheet_and_no_close_pair():
     x = model.rest_positions.copy()
     fit = tree_fit(sc, x.shape[0])
     refit(sc.tree, sc.triangles, x, fit)
-    pairs, found = leaf_pairs(sc.tree, sc.triangles, fit, _NEVER_FLAT, 0.02)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.02)
     with_dop = {tuple(q) for q in pairs[:found]}
     close = close_pairs(sc, x, fit.box, pairs, found, 0.02)
     fit.dop[:, :6], fit.dop[:, 6:] = -np.inf, np.inf  # the diagonal bounds left open
-    pairs, found = leaf_pairs(sc.tree, sc.triangles, fit, _NEVER_FLAT, 0.02)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.02)
     boxes_only = {tuple(q) for q in pairs[:found]}
     assert with_dop < boxes_only
     for a, b in zip(close, close_pairs(sc, x, fit.box, pairs, found, 0.02), strict=True):
@@ -277,7 +278,7 @@ def test_the_close_pair_search_meets_each_pair_once_as_an_all_pairs_search_does(
     reach = 0.05
     fit = tree_fit(sc, x.shape[0])
     refit(sc.tree, sc.triangles, x, fit)
-    pairs, found = leaf_pairs(sc.tree, sc.triangles, fit, _NEVER_FLAT, reach)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, reach)
     vt, ee = close_pairs(sc, x, fit.box, pairs, found, reach)
     tris = [tuple(int(v) for v in t) for t in sc.triangles]
     expected_vt = {
@@ -320,6 +321,31 @@ def test_the_patch_hierarchy_partitions_the_triangles_and_knows_separate_pieces(
     assert tree.count[leaves].max() <= LEAF
     assert not tree.connected[0]
     assert tree.connected[tree.left[0]] and tree.connected[tree.right[0]]
+
+
+def test_patches_share_a_vertex_exactly_when_their_rims_do():
+    """The adjacency test compares the rims (vertices a patch shares with triangles outside
+    it) of two disjoint patches: it agrees with the intersection of their vertex sets for
+    every pair of disjoint nodes of a 9 x 9 sheet's hierarchy."""
+    model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 1.0, 9)])
+    tree = patch_tree(model.rest_positions, model.triangles)
+    tris = model.triangles
+    verts = [
+        set(tris[tree.order[tree.first[k] : tree.first[k] + tree.count[k]]].ravel())
+        for k in range(len(tree.first))
+    ]
+    stamp, clock = np.zeros(model.n_vertices, np.int64), np.zeros(1, np.int64)
+    tested = 0
+    for a in range(len(verts)):
+        for b in range(len(verts)):
+            ta = set(tree.order[tree.first[a] : tree.first[a] + tree.count[a]])
+            tb = set(tree.order[tree.first[b] : tree.first[b] + tree.count[b]])
+            if ta & tb:
+                continue  # nested nodes: the search never pairs them
+            expected = bool(verts[a] & verts[b])
+            assert _adjacent(tree.rim_ptr, tree.rim, a, b, stamp, clock) == expected
+            tested += expected
+    assert tested > 100
 
 
 @pytest.mark.parametrize("side", [1.0, -1.0])

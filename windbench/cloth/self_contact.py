@@ -85,6 +85,8 @@ class PatchTree(NamedTuple):
     leaf_edge: np.ndarray  # (.., 2)
     corner_ptr: np.ndarray  # (N + 1,) every vertex of leaf k's triangles, once:
     leaf_corner: np.ndarray  # leaf_corner[corner_ptr[k]:corner_ptr[k + 1]] (its bounds)
+    rim_ptr: np.ndarray  # (N + 1,) the vertices node k shares with triangles outside it:
+    rim: np.ndarray  # rim[rim_ptr[k]:rim_ptr[k + 1]] (the adjacency test)
     depth: int  # levels below the root
 
 
@@ -177,10 +179,13 @@ def patch_tree(rest, triangles) -> PatchTree:
     nodes = nodes or [[0, 0, -1, -1]]  # no cloth: one empty leaf
     first, count, left, right = (np.array(col, np.int64) for col in zip(*nodes, strict=True))
     connected = np.zeros(len(nodes), np.bool_)
-    verts, edges, corners = [], [], []
+    verts, edges, corners, rims = [], [], [], []
     owned_vertices, owned_edges = set(), set()
+    valence = np.bincount(tri.ravel(), minlength=int(tri.max(initial=-1)) + 1)
     for k in range(len(nodes) - 1, -1, -1):
         own = tri[order[first[k] : first[k] + count[k]]]
+        ids, inside = np.unique(own, return_counts=True)
+        rims.append(ids[inside < valence[ids]])
         if left[k] < 0:
             connected[k] = own.shape[0] == 0 or _one_piece(own)
             corners.append(np.unique(own))
@@ -200,6 +205,7 @@ def patch_tree(rest, triangles) -> PatchTree:
     vert_ptr, leaf_vert = _csr(verts[::-1])
     edge_ptr, leaf_edge = _csr(edges[::-1])
     corner_ptr, leaf_corner = _csr(corners[::-1])
+    rim_ptr, rim = _csr(rims[::-1])
     return PatchTree(
         order,
         first,
@@ -213,6 +219,8 @@ def patch_tree(rest, triangles) -> PatchTree:
         np.ascontiguousarray(leaf_edge.reshape(-1, 2), np.int64),
         corner_ptr,
         leaf_corner.astype(np.int64),
+        rim_ptr,
+        rim.astype(np.int64),
         depth,
     )
 
@@ -389,26 +397,27 @@ def _boxes_meet(box_a, a, box_b, b, gap):
 
 
 @njit(cache=True)
-def _adjacent(order, first, count, triangles, a, b, stamp, clock):
-    """Whether patches a and b share a vertex (marks in ``stamp``, clock[0] the last)."""
+def _adjacent(rim_ptr, rim, a, b, stamp, clock):
+    """Whether the disjoint patches a and b share a vertex (marks in ``stamp``, clock[0]
+    the last): a shared vertex lies on both rims, each patch holding a triangle of it
+    outside the other, so the rims alone are compared."""
     clock[0] += 1
     t = clock[0]
-    for j in range(first[a], first[a] + count[a]):
-        for v in range(3):
-            stamp[triangles[order[j], v]] = t
-    for j in range(first[b], first[b] + count[b]):
-        for v in range(3):
-            if stamp[triangles[order[j], v]] == t:
-                return True
+    for j in range(rim_ptr[a], rim_ptr[a + 1]):
+        stamp[rim[j]] = t
+    for j in range(rim_ptr[b], rim_ptr[b + 1]):
+        if stamp[rim[j]] == t:
+            return True
     return False
 
 
 @njit(cache=True)
-def leaf_pairs(tree, triangles, fit, cos_flat, gap):
+def leaf_pairs(tree, fit, cos_flat, gap):
     """(pairs (K, 2), K): the leaf patches to test, (a, a) against itself and (a, b) against
     each other (module docstring): a patch is skipped when it is connected and its cone's
-    cosine exceeds ``cos_flat``; two patches when their boxes are more than ``gap`` apart,
-    or when they are connected, share a vertex and fit in one such cone together."""
+    cosine exceeds ``cos_flat``; two patches when their bounds (:func:`_boxes_meet`,
+    :func:`_dops_meet`) are more than ``gap`` apart, or when they are connected, share a
+    vertex and fit in one such cone together."""
     box, dop, cone, stack, stamp, clock = (
         fit.box,
         fit.dop,
@@ -417,8 +426,7 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
         fit.stamp,
         fit.clock,
     )
-    order, first, count, left, right = tree.order, tree.first, tree.count, tree.left, tree.right
-    connected = tree.connected
+    count, left, right, connected = tree.count, tree.left, tree.right, tree.connected
     pairs = np.empty((64, 2), np.int64)
     found = np.int64(0)  # not the literal 0: :func:`_append` would be compiled for it too
     top = 1
@@ -443,7 +451,7 @@ def leaf_pairs(tree, triangles, fit, cos_flat, gap):
                 connected[a]
                 and connected[b]
                 and _union_cos(cone, a, b) > cos_flat
-                and _adjacent(order, first, count, triangles, a, b, stamp, clock)
+                and _adjacent(tree.rim_ptr, tree.rim, a, b, stamp, clock)
             ):
                 continue
             split_a = left[a] >= 0 and (left[b] < 0 or count[a] >= count[b])
@@ -748,7 +756,7 @@ def self_contacts(sc, inv_mass, p, x0, fit):
     largest = moves.max()  # there are triangles, so vertices
     reach = pair_reach(largest, largest, thickness)
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_CONTACT, reach)
+    pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach)
     vt, ee = close_pairs(sc, p, fit.box, pairs, found, reach)
     pushed = 0
     for q in range(vt.shape[0]):
@@ -920,7 +928,7 @@ def _crossing_count(sc, p, fit):
     so each is counted once."""
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, triangles, fit, _NEVER_FLAT, 0.0)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.0)
     candidates = _crossing_candidates(sc, p, pairs, found)
     count = 0
     for q in range(candidates.shape[0]):
@@ -1097,7 +1105,7 @@ def _crossing_edges(sc, p, fit):
     40x25 flag, with the cones 6 % (``bench_cloth.py``)."""
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, triangles, fit, _COS_UNTANGLE, 0.0)
+    pairs, found = leaf_pairs(sc.tree, fit, _COS_UNTANGLE, 0.0)
     candidates = _crossing_candidates(sc, p, pairs, found)
     rows = np.empty((max(1, 6 * candidates.shape[0]), 4), np.int64)
     depth = np.empty(rows.shape[0])
