@@ -312,14 +312,15 @@ def _near_triangle(contacts, inv_mass, p, corners, clear, normal):
 
 
 @njit(cache=True)
-def deepest_surface_penetration(bodies, boxes, positions, edges, triangles, inv_mass):
+def deepest_surface_penetration(bodies, boxes, positions, edges, triangles, inv_mass, parts):
     """max(0, -phi) over the points of the edges (:func:`edge_minimum`) and the triangles'
     TRIANGLE_SAMPLES: how deep the deepest edge or triangle point lies inside a body.
-    Edges and triangles with a pinned corner are left out, as in the contacts."""
+    Edges and triangles with a pinned corner are left out, as in the contacts; ``parts``
+    (edge ids, triangle ids) are those that may meet a body's box."""
     normal, lo, hi = np.empty(3), np.empty(3), np.empty(3)
     deepest = 0.0
     for b in range(boxes.shape[0]):
-        for e in range(edges.shape[0]):
+        for e in parts[0]:
             if _attached(inv_mass, edges, e, 2):
                 continue
             _bounds(positions, edges[e], lo, hi)
@@ -328,7 +329,7 @@ def deepest_surface_penetration(bodies, boxes, positions, edges, triangles, inv_
             ):
                 pa, pb = positions[edges[e, 0]], positions[edges[e, 1]]
                 deepest = max(deepest, -edge_minimum(bodies, b, pa, pb, normal)[1])
-        for f in range(triangles.shape[0]):
+        for f in parts[1]:
             if _attached(inv_mass, triangles, f, 3):
                 continue
             _bounds(positions, triangles[f], lo, hi)
@@ -344,13 +345,17 @@ def deepest_surface_penetration(bodies, boxes, positions, edges, triangles, inv_
     return deepest
 
 
-def surface_penetration(bodies, boxes, positions, edges, triangles, inv_mass) -> float:
+def surface_penetration(bodies, boxes, positions, edges, triangles, inv_mass, parts=None) -> float:
     """Largest depth (m) of a point of a cloth edge or triangle inside a body of the table
-    ``bodies`` (:func:`deepest_surface_penetration`); 0 with no bodies or no cloth."""
+    ``bodies`` (:func:`deepest_surface_penetration`); 0 with no bodies or no cloth.
+    ``parts`` (edge ids, triangle ids): a superset of those whose box meets a body's box
+    in ``boxes`` (the held parts of :mod:`~windbench.cloth.near_bodies`); default all."""
     if bodies.kinds.shape[0] == 0 or positions.shape[0] == 0:
         return 0.0
     x = np.ascontiguousarray(positions, dtype=np.float64)
-    return float(deepest_surface_penetration(bodies, boxes, x, edges, triangles, inv_mass))
+    if parts is None:
+        parts = (np.arange(edges.shape[0]), np.arange(triangles.shape[0]))
+    return float(deepest_surface_penetration(bodies, boxes, x, edges, triangles, inv_mass, parts))
 
 
 def surface_boxes(bodies, boxes, positions, triangles) -> np.ndarray:

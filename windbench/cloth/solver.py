@@ -778,6 +778,15 @@ class XPBDCloth:
         self._contact_timing = (calls + 1, held)
         return held
 
+    def _near_parts(self, x) -> tuple[np.ndarray, np.ndarray] | None:
+        """(edge ids, triangle ids) that may touch a body at ``x``, the contacts' held parts
+        (:func:`_hold_near`); None without bodies."""
+        if not self.tables.contacts.bodies.kinds.shape[0]:
+            return None
+        near = self.workspace.near
+        _hold_near(self.tables, x, near)
+        return near.edges[: near.counts[1]], near.triangles[: near.counts[2]]
+
     def mobility(self) -> np.ndarray:
         """1 / (mass per area) of each vertex (m^2/kg): its lumped area over its mass, 0 for
         a pinned vertex."""
@@ -814,12 +823,13 @@ class XPBDCloth:
         thin = self.tables.surface.boxes
         c, sc = self.tables.constraints, self.tables.self_contact
         top, over = self.stretch(state.positions)
+        x = np.ascontiguousarray(state.positions, dtype=np.float64)
         return {
             "kinetic_energy": self.kinetic_energy(state.velocities),
             "max_penetration": max(
-                max_penetration(bodies, boxes, state.positions),
+                max_penetration(bodies, boxes, x),
                 surface_penetration(
-                    bodies, thin, state.positions, c.edges, sc.triangles, c.inv_mass
+                    bodies, thin, x, c.edges, sc.triangles, c.inv_mass, self._near_parts(x)
                 ),
             ),
             "max_stretch": top,
