@@ -130,7 +130,7 @@ def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
     ms_refit, _ = median_ms(sc_kernels.refit, tree, tri, x, fit, repeats=repeats)
     cos = sc_kernels._COS_CONTACT
     ms_pairs, (pairs, found) = median_ms(
-        sc_kernels.leaf_pairs, tree, fit, cos, reach, repeats=repeats
+        sc_kernels.leaf_pairs, tree, fit, cos, reach, True, repeats=repeats
     )
     ms_close, (vt, ee) = median_ms(
         sc_kernels.close_pairs, sc, x, fit.box, pairs, found, reach, repeats=repeats

@@ -228,12 +228,12 @@ def test_a_flat_sheet_needs_no_leaf_tests_and_a_folded_one_does():
     x = model.rest_positions.copy()
     fit = tree_fit(sc, x.shape[0])
     refit(sc.tree, sc.triangles, x, fit)
-    assert leaf_pairs(sc.tree, fit, 0.5, 0.02)[1] == 0
+    assert leaf_pairs(sc.tree, fit, 0.5, 0.02, True)[1] == 0
     upper = x[:, 1] > 0.5
     x[upper, 1] = 1.0 - x[upper, 1]
     x[upper, 2] = 0.002 + 0.001 * (x[upper, 1] < 0.49)
     refit(sc.tree, sc.triangles, x, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, 0.5, 0.02)
+    pairs, found = leaf_pairs(sc.tree, fit, 0.5, 0.02, True)
     assert found > 0
     leaves = np.flatnonzero(sc.tree.left < 0)
     corners = {
@@ -247,6 +247,37 @@ def test_a_flat_sheet_needs_no_leaf_tests_and_a_folded_one_does():
     assert any((a in lower and b in upper) or (a in upper and b in lower) for a, b in pairs[:found])
 
 
+def test_leaves_a_third_joins_into_one_flat_patch_are_not_tested_against_each_other():
+    """A fine sheet (cells of 1.6 cm, under the 2 cm reach) rippled 2 cm deep every 10 cm:
+    larger patches are not flat, leaves are, and leaves that share no vertex come within
+    the reach. The contacts' bridging (a third leaf sharing a vertex with each, the three
+    one flat connected patch) leaves fewer pairs to test. Folded flat onto itself, 1 cm
+    apart, its two layers are tested against each other."""
+    model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 0.5, 33)])
+    sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
+    x = model.rest_positions.copy()
+    x[:, 2] = 0.02 * np.sin(2 * np.pi * x[:, 0] / 0.1) * np.sin(2 * np.pi * x[:, 1] / 0.12)
+    fit = tree_fit(sc, x.shape[0])
+    refit(sc.tree, sc.triangles, x, fit)
+    bridged = leaf_pairs(sc.tree, fit, 0.5, 0.02, True)[1]
+    assert bridged < 0.7 * leaf_pairs(sc.tree, fit, 0.5, 0.02, False)[1]
+    x = model.rest_positions.copy()
+    arm = x[:, 1] > 0.25  # folded over: the far half turned back above the near one
+    x[arm, 1], x[arm, 2] = 0.5 - x[arm, 1], 0.01
+    refit(sc.tree, sc.triangles, x, fit)
+    pairs, found = leaf_pairs(sc.tree, fit, 0.5, 0.02, True)
+    z = {
+        k: x[sc.triangles[sc.tree.order[sc.tree.first[k] : sc.tree.first[k] + sc.tree.count[k]]]][
+            ..., 2
+        ]
+        for k in np.unique(pairs[:found])
+    }
+    assert any(
+        z[a].max() == 0.0 and z[b].min() == 0.01 or z[b].max() == 0.0 and z[a].min() == 0.01
+        for a, b in pairs[:found]
+    )
+
+
 def test_diagonal_bounds_drop_leaf_pairs_of_a_tilted_sheet_and_no_close_pair():
     """A sheet whose normal is (1, 1, 1) / sqrt 3: the boxes of patches a leaf apart
     overlap more than the patches come near. The 18-DOP search tests a strict subset of
@@ -258,11 +289,11 @@ def test_diagonal_bounds_drop_leaf_pairs_of_a_tilted_sheet_and_no_close_pair():
     x = model.rest_positions.copy()
     fit = tree_fit(sc, x.shape[0])
     refit(sc.tree, sc.triangles, x, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.02)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.02, False)
     with_dop = {tuple(q) for q in pairs[:found]}
     close = close_pairs(sc, x, fit.box, pairs, found, 0.02)
     fit.dop[:, :6], fit.dop[:, 6:] = -np.inf, np.inf  # the diagonal bounds left open
-    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.02)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.02, False)
     boxes_only = {tuple(q) for q in pairs[:found]}
     assert with_dop < boxes_only
     for a, b in zip(close, close_pairs(sc, x, fit.box, pairs, found, 0.02), strict=True):
@@ -278,7 +309,7 @@ def test_the_close_pair_search_meets_each_pair_once_as_an_all_pairs_search_does(
     reach = 0.05
     fit = tree_fit(sc, x.shape[0])
     refit(sc.tree, sc.triangles, x, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, reach)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, reach, False)
     vt, ee = close_pairs(sc, x, fit.box, pairs, found, reach)
     tris = [tuple(int(v) for v in t) for t in sc.triangles]
     expected_vt = {

@@ -87,6 +87,8 @@ class PatchTree(NamedTuple):
     leaf_corner: np.ndarray  # leaf_corner[corner_ptr[k]:corner_ptr[k + 1]] (its bounds)
     rim_ptr: np.ndarray  # (N + 1,) the vertices node k shares with triangles outside it:
     rim: np.ndarray  # rim[rim_ptr[k]:rim_ptr[k + 1]] (the adjacency test)
+    nbr_ptr: np.ndarray  # (N + 1,) the leaves that share a vertex with leaf k, ascending:
+    nbr: np.ndarray  # nbr[nbr_ptr[k]:nbr_ptr[k + 1]] (:func:`_bridged`)
     depth: int  # levels below the root
 
 
@@ -166,6 +168,20 @@ def _claim(items: np.ndarray, owned: set) -> np.ndarray:
     return items[keep]
 
 
+def _leaf_neighbours(corner_ptr: np.ndarray, corners: np.ndarray) -> list[np.ndarray]:
+    """Per node, the other leaves that hold one of its corners (ascending; none for an
+    inner node, whose corner range is empty)."""
+    nodes = np.repeat(np.arange(len(corner_ptr) - 1), np.diff(corner_ptr))
+    holders: dict[int, list[int]] = {}
+    for k, v in zip(nodes.tolist(), corners.tolist(), strict=True):
+        holders.setdefault(v, []).append(k)
+    out = []
+    for k in range(len(corner_ptr) - 1):
+        near = {h for v in corners[corner_ptr[k] : corner_ptr[k + 1]].tolist() for h in holders[v]}
+        out.append(np.array(sorted(near - {k}), np.int64))
+    return out
+
+
 def patch_tree(rest, triangles) -> PatchTree:
     """The hierarchy of the module docstring over ``triangles`` at the rest positions.
 
@@ -206,6 +222,7 @@ def patch_tree(rest, triangles) -> PatchTree:
     edge_ptr, leaf_edge = _csr(edges[::-1])
     corner_ptr, leaf_corner = _csr(corners[::-1])
     rim_ptr, rim = _csr(rims[::-1])
+    nbr_ptr, nbr = _csr(_leaf_neighbours(corner_ptr, leaf_corner))
     return PatchTree(
         order,
         first,
@@ -221,6 +238,8 @@ def patch_tree(rest, triangles) -> PatchTree:
         leaf_corner.astype(np.int64),
         rim_ptr,
         rim.astype(np.int64),
+        nbr_ptr,
+        nbr.astype(np.int64),
         depth,
     )
 
@@ -412,12 +431,37 @@ def _adjacent(rim_ptr, rim, a, b, stamp, clock):
 
 
 @njit(cache=True)
-def leaf_pairs(tree, fit, cos_flat, gap):
+def _bridged(tree, cone, a, b, cos_flat):
+    """Whether leaves a and b, connected and sharing no vertex, lie in one flat connected
+    patch with a leaf c that shares a vertex with each (the sorted neighbour lists merged):
+    the patch a + c + b cannot meet itself, as one leaf cannot."""
+    ptr, nbr, connected = tree.nbr_ptr, tree.nbr, tree.connected
+    if not (connected[a] and connected[b]):
+        return False
+    i, j = ptr[a], ptr[b]
+    while i < ptr[a + 1] and j < ptr[b + 1]:
+        c, d = nbr[i], nbr[j]
+        if c == d and connected[c]:
+            sx = cone[a, 0] + cone[b, 0] + cone[c, 0]
+            sy = cone[a, 1] + cone[b, 1] + cone[c, 1]
+            sz = cone[a, 2] + cone[b, 2] + cone[c, 2]
+            low = min(_widened(sx, sy, sz, cone, a)[0], _widened(sx, sy, sz, cone, b)[0])
+            if min(low, _widened(sx, sy, sz, cone, c)[0]) > cos_flat:
+                return True
+        i += c <= d
+        j += d <= c
+    return False
+
+
+@njit(cache=True)
+def leaf_pairs(tree, fit, cos_flat, gap, bridge):
     """(pairs (K, 2), K): the leaf patches to test, (a, a) against itself and (a, b) against
     each other (module docstring): a patch is skipped when it is connected and its cone's
     cosine exceeds ``cos_flat``; two patches when their bounds (:func:`_boxes_meet`,
     :func:`_dops_meet`) are more than ``gap`` apart, or when they are connected, share a
-    vertex and fit in one such cone together."""
+    vertex and fit in one such cone together, or, with ``bridge``, two leaves that a third
+    joins into one (:func:`_bridged`: the contacts; not the search for crossings, where a
+    crumple tighter than the thickness crosses itself within such a cone)."""
     box, dop, cone, stack, stamp, clock = (
         fit.box,
         fit.dop,
@@ -453,6 +497,8 @@ def leaf_pairs(tree, fit, cos_flat, gap):
                 and _union_cos(cone, a, b) > cos_flat
                 and _adjacent(tree.rim_ptr, tree.rim, a, b, stamp, clock)
             ):
+                continue
+            if bridge and left[a] < 0 and left[b] < 0 and _bridged(tree, cone, a, b, cos_flat):
                 continue
             split_a = left[a] >= 0 and (left[b] < 0 or count[a] >= count[b])
             if split_a or left[b] >= 0:
@@ -756,7 +802,7 @@ def self_contacts(sc, inv_mass, p, x0, fit):
     largest = moves.max()  # there are triangles, so vertices
     reach = pair_reach(largest, largest, thickness)
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach)
+    pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, True)
     vt, ee = close_pairs(sc, p, fit.box, pairs, found, reach)
     pushed = 0
     for q in range(vt.shape[0]):
@@ -928,7 +974,7 @@ def _crossing_count(sc, p, fit):
     so each is counted once."""
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.0)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.0, False)
     candidates = _crossing_candidates(sc, p, pairs, found)
     count = 0
     for q in range(candidates.shape[0]):
@@ -1105,7 +1151,7 @@ def _crossing_edges(sc, p, fit):
     40x25 flag, with the cones 6 % (``bench_cloth.py``)."""
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _COS_UNTANGLE, 0.0)
+    pairs, found = leaf_pairs(sc.tree, fit, _COS_UNTANGLE, 0.0, False)
     candidates = _crossing_candidates(sc, p, pairs, found)
     rows = np.empty((max(1, 6 * candidates.shape[0]), 4), np.int64)
     depth = np.empty(rows.shape[0])
