@@ -11,11 +11,9 @@ bounds and cones, the leaf-pair search (``leaf_pairs``), the close-pair search
 patches' triangles keep their normals within the contact cone (60 degrees) of their mean
 is counted as ``flat_leaf_pairs``: how many of the tested pairs are neighbours on a gently
 curved sheet rather than layers that may touch. Of the pairs of two patches,
-``adjacent_leaf_pairs`` share a vertex; ``bridged_leaf_pairs`` do not, but a third leaf
-shares a vertex with each and the three together pass the pass's own flatness test (each
-patch connected, the cone around their normals, bounded as ``leaf_pairs`` bounds it,
-within the contact cone): a connected flat patch holds both, so the test that skips a
-flat patch's own pairs would skip them too, were it applied to such triples.
+``adjacent_leaf_pairs`` share a vertex; ``bridged_leaf_pairs`` counts the pairs the
+search leaves out because a third leaf joins the two into one flat connected patch (the
+leaf pairs without that test, ``bridge`` false, less those with it).
 
     PYTHONPATH=$PWD python experiments/bench_self_contact.py [--frames 60] [--sizes 40x25 64x64]
 
@@ -74,41 +72,13 @@ def flat_pairs(sc, fit, pairs) -> int:
     return count
 
 
-def leaf_neighbours(sc) -> dict[int, set[int]]:
-    """leaf -> the other leaves that share a vertex with it."""
-    tree, tri = sc.tree, sc.triangles
-    verts = {
-        int(k): {
-            int(v) for v in tri[tree.order[tree.first[k] : tree.first[k] + tree.count[k]]].ravel()
-        }
-        for k in np.flatnonzero(tree.left < 0)
-    }
-    by_vertex: dict[int, set[int]] = {}
-    for k, vs in verts.items():
-        for v in vs:
-            by_vertex.setdefault(v, set()).add(k)
-    return {k: set().union(*(by_vertex[v] for v in vs)) - {k} for k, vs in verts.items()}
-
-
-def bridged_pairs(sc, fit, pairs) -> tuple[int, int]:
-    """(adjacent, bridged) pairs of two leaves (module docstring)."""
-    tree, cone = sc.tree, fit.cone
-    nb = leaf_neighbours(sc)
-
-    def flat(ids) -> bool:
-        s = cone[ids, :3].sum(axis=0)
-        cos = min(sc_kernels._widened(s[0], s[1], s[2], cone, k)[0] for k in ids)
-        return bool(tree.connected[ids].all() and cos > sc_kernels._COS_CONTACT)
-
-    adjacent = bridged = 0
-    for a, b in (tuple(int(k) for k in p) for p in pairs):
-        if a == b:
-            continue
-        if b in nb[a]:
-            adjacent += 1
-        elif any(flat([a, b, c]) for c in nb[a] & nb[b]):
-            bridged += 1
-    return adjacent, bridged
+def adjacent_pairs(sc, pairs) -> int:
+    """Pairs of two leaves that share a vertex (the leaves' neighbour lists)."""
+    nbr_ptr, nbr = sc.tree.nbr_ptr, sc.tree.nbr
+    return sum(
+        int(b in nbr[nbr_ptr[a] : nbr_ptr[a + 1]])
+        for a, b in (tuple(int(k) for k in p) for p in pairs)
+    )
 
 
 def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
@@ -135,7 +105,7 @@ def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
     ms_close, (vt, ee) = median_ms(
         sc_kernels.close_pairs, sc, x, fit.box, pairs, found, reach, repeats=repeats
     )
-    adjacent, bridged = bridged_pairs(sc, fit, pairs[:found])
+    bridged = sc_kernels.leaf_pairs(tree, fit, cos, reach, False)[1] - found
     inv_mass = solver.tables.constraints.inv_mass
     ms_pass, pushed = median_ms(
         lambda: sc_kernels.self_contacts(sc, inv_mass, x.copy(), x, fit), repeats=repeats
@@ -158,7 +128,7 @@ def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
         "ms_pass": round(ms_pass, 3),
         "leaf_pairs": int(found),
         "flat_leaf_pairs": flat_pairs(sc, fit, pairs[:found]),
-        "adjacent_leaf_pairs": adjacent,
+        "adjacent_leaf_pairs": adjacent_pairs(sc, pairs[:found]),
         "bridged_leaf_pairs": bridged,
         "vertex_triangle_pairs": len(vt),
         "edge_pairs": len(ee),
