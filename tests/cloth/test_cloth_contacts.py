@@ -278,11 +278,11 @@ def test_leaves_a_third_joins_into_one_flat_patch_are_not_tested_against_each_ot
     )
 
 
-def test_diagonal_bounds_drop_leaf_pairs_of_a_tilted_sheet_and_no_close_pair():
+def test_diagonal_bounds_drop_leaf_pairs_of_a_tilted_sheet():
     """A sheet whose normal is (1, 1, 1) / sqrt 3: the boxes of patches a leaf apart
     overlap more than the patches come near. The 18-DOP search tests a strict subset of
-    the leaf pairs the boxes alone would (diagonal bounds left open) and finds the same
-    close pairs; that these are an all-pairs search's is the next test's business."""
+    the leaf pairs the boxes alone would (diagonal bounds left open). That it misses no
+    close pair is the next test's business (an all-pairs search on crumpled sheets)."""
     u, v = (np.sqrt(0.5), -np.sqrt(0.5), 0.0), tuple(np.array([1.0, 1.0, -2.0]) / np.sqrt(6.0))
     model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 1.0, 17, u=u, v=v)])
     sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
@@ -291,13 +291,9 @@ def test_diagonal_bounds_drop_leaf_pairs_of_a_tilted_sheet_and_no_close_pair():
     refit(sc.tree, sc.triangles, x, fit)
     pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.02, False)
     with_dop = {tuple(q) for q in pairs[:found]}
-    close = close_pairs(sc, x, fit.box, pairs, found, 0.02)
     fit.dop[:, :6], fit.dop[:, 6:] = -np.inf, np.inf  # the diagonal bounds left open
     pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.02, False)
-    boxes_only = {tuple(q) for q in pairs[:found]}
-    assert with_dop < boxes_only
-    for a, b in zip(close, close_pairs(sc, x, fit.box, pairs, found, 0.02), strict=True):
-        np.testing.assert_array_equal(a, b)
+    assert with_dop < {tuple(q) for q in pairs[:found]}
 
 
 @pytest.mark.parametrize("seed", [1, 2])
