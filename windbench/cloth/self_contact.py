@@ -60,6 +60,9 @@ _NEVER_FLAT = 2.0  # a cosine no cone reaches: boxes alone (the intersection fig
 _COS_UNTANGLE = 0.0  # cos 90 degrees: the cones below it cull the untangling's search
 _WIDE = -2.0  # the cosine recorded for a cone of 90 degrees or more
 _SQRT2 = math.sqrt(2.0)
+# leaf_pairs' ``bridge`` as np.bool_, not a literal True or False: a literal would compile
+# leaf_pairs once for each
+_BRIDGE, _NO_BRIDGE = np.bool_(True), np.bool_(False)
 DOP_SLACK = 1e-9  # m added to the diagonal bounds' gap (:func:`_dops_meet`) against rounding
 
 
@@ -802,7 +805,7 @@ def self_contacts(sc, inv_mass, p, x0, fit):
     largest = moves.max()  # there are triangles, so vertices
     reach = pair_reach(largest, largest, thickness)
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, True)
+    pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, _BRIDGE)
     vt, ee = close_pairs(sc, p, fit.box, pairs, found, reach)
     pushed = 0
     for q in range(vt.shape[0]):
@@ -974,7 +977,7 @@ def _crossing_count(sc, p, fit):
     so each is counted once."""
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.0, False)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.0, _NO_BRIDGE)
     candidates = _crossing_candidates(sc, p, pairs, found)
     count = 0
     for q in range(candidates.shape[0]):
@@ -1151,7 +1154,7 @@ def _crossing_edges(sc, p, fit):
     40x25 flag, with the cones 6 % (``bench_cloth.py``)."""
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _COS_UNTANGLE, 0.0, False)
+    pairs, found = leaf_pairs(sc.tree, fit, _COS_UNTANGLE, 0.0, _NO_BRIDGE)
     candidates = _crossing_candidates(sc, p, pairs, found)
     rows = np.empty((max(1, 6 * candidates.shape[0]), 4), np.int64)
     depth = np.empty(rows.shape[0])
