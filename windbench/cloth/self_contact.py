@@ -435,9 +435,10 @@ def _adjacent(rim_ptr, rim, a, b, stamp, clock):
 
 @njit(cache=True)
 def _bridged(tree, cone, a, b, cos_flat):
-    """Whether leaves a and b, connected and sharing no vertex, lie in one flat connected
-    patch with a leaf c that shares a vertex with each (the sorted neighbour lists merged):
-    the patch a + c + b cannot meet itself, as one leaf cannot."""
+    """Whether the connected leaves a and b lie in one flat connected patch with a leaf c
+    that shares a vertex with each (the sorted neighbour lists merged; the cone bounded
+    about the axis of the three): the patch a + c + b cannot meet itself, as a flat leaf
+    cannot (module docstring)."""
     ptr, nbr, connected = tree.nbr_ptr, tree.nbr, tree.connected
     if not (connected[a] and connected[b]):
         return False
