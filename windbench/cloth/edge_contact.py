@@ -40,6 +40,7 @@ import numpy as np
 from numba import njit
 
 from windbench.cloth.collision import LIPSCHITZ
+from windbench.cloth.near_bodies import box_within
 from windbench.geometry.bodies import BOX, CAPSULE, CYLINDER, table_distance
 
 STRETCH_SLACK = 1.5  # an edge longer than this times the longest rest side has blown up
@@ -236,26 +237,6 @@ def _longest_side(p, corners):
 
 
 @njit(cache=True, inline="always")
-def _near_a_box(boxes, p, prims, e, corners):
-    """Whether the box of the ``corners`` (2 or 3, a constant: the loops unroll) of edge or
-    triangle ``prims[e]`` meets any grown body box (indices, no array view: the broad
-    phase, run for every edge and triangle)."""
-    for b in range(boxes.shape[0]):
-        meets = True
-        for k in range(3):
-            lo, hi = np.inf, -np.inf
-            for c in range(corners):
-                x = p[prims[e, c], k]
-                lo, hi = min(lo, x), max(hi, x)
-            if hi < boxes[b, k] or lo > boxes[b, k + 3]:
-                meets = False
-                break
-        if meets:
-            return True
-    return False
-
-
-@njit(cache=True, inline="always")
 def _attached(inv_mass, prims, e, corners):
     """Whether one of the ``corners`` of edge or triangle ``prims[e]`` is pinned: the cloth
     is attached to a body there (a flag's hem around its pole), so it may lie in it as the
@@ -282,15 +263,15 @@ def surface_contacts(contacts, inv_mass, edges, triangles, p, clear, near):
 @njit(cache=True)
 def _near_ones(boxes, p, prims, held, n_held):
     """Of the edges or triangles (rows of 2 or 3 corners) ``held[:n_held]``, those whose box
-    meets a body's grown box. A loop of its own: with the contact calls in the same loop
-    numba keeps reference counts inside it, 20 times the cost of the box tests. The corner
-    count is read from ``prims``, not passed: a literal 2 or 3 compiled it twice."""
-    corners = prims.shape[1]
+    meets a body's grown box (:func:`~windbench.cloth.near_bodies.box_within`). A loop of
+    its own: with the contact calls in the same loop numba keeps reference counts inside
+    it, 20 times the cost of the box tests."""
+    last = prims.shape[1] - 1
     out = np.empty(n_held, np.int64)
     found = 0
     for q in range(n_held):
         e = held[q]
-        if _near_a_box(boxes, p, prims, e, corners):
+        if box_within(boxes, p, prims[e, 0], prims[e, min(1, last)], prims[e, last], 0.0):
             out[found] = e
             found += 1
     return out[:found]

@@ -66,7 +66,7 @@ def gather_near(boxes, thin_boxes, inv_mass, edges, triangles, p, near):
     ``thin_boxes`` for the others) at ``p``, which becomes the anchor."""
     n = 0
     for i in range(p.shape[0]):
-        if inv_mass[i] > 0.0 and _within_slack(boxes, p, i, i, i):
+        if inv_mass[i] > 0.0 and box_within(boxes, p, i, i, i, NEAR_SLACK):
             near.vertices[n] = i
             n += 1
     near.counts[0] = n
@@ -85,21 +85,23 @@ def _gather_parts(boxes, inv_mass, p, prims, out):
     for e in range(prims.shape[0]):
         a, b, c = prims[e, 0], prims[e, min(1, last)], prims[e, last]
         if inv_mass[a] > 0.0 and inv_mass[b] > 0.0 and inv_mass[c] > 0.0:
-            if _within_slack(boxes, p, a, b, c):
+            if box_within(boxes, p, a, b, c, NEAR_SLACK):
                 out[n] = e
                 n += 1
     return n
 
 
 @njit(cache=True, inline="always")
-def _within_slack(boxes, p, a, b, c):
-    """Whether the box of the points a, b, c of ``p`` comes within NEAR_SLACK of a box."""
+def box_within(boxes, p, a, b, c, gap):
+    """Whether the box of the points a, b, c of ``p`` (a repeated id for an edge or a
+    vertex) comes within ``gap`` of a box of ``boxes`` (lower and upper corners; indices,
+    no array view: the broad phase, run for every part)."""
     for k in range(boxes.shape[0]):
         meets = True
         for ax in range(3):
             lo = min(p[a, ax], p[b, ax], p[c, ax])
             hi = max(p[a, ax], p[b, ax], p[c, ax])
-            if hi + NEAR_SLACK < boxes[k, ax] or lo - NEAR_SLACK > boxes[k, 3 + ax]:
+            if hi + gap < boxes[k, ax] or lo - gap > boxes[k, 3 + ax]:
                 meets = False
                 break
         if meets:
