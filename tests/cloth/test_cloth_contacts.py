@@ -13,12 +13,18 @@ from windbench.cloth.edge_contact import edge_minimum, surface_penetration
 from windbench.cloth.mesh import flag_mesh
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.cloth.self_contact import (
+    _BRIDGE,
+    _COS_CONTACT,
     _NEVER_FLAT,
+    _ROOT,
     LEAF,
+    TASKS_PER_THREAD,
     _adjacent,
     _edges_close,
     _vertex_near_triangle,
     close_pairs,
+    contact_pairs,
+    descend,
     leaf_pairs,
     pair_reach,
     pass_due,
@@ -219,6 +225,32 @@ def test_the_patch_hierarchy_counts_the_crossings_a_brute_force_search_finds(see
     assert self_intersections(sc, x) == expected
 
 
+def test_the_threads_find_the_serial_search_pairs_in_its_order():
+    """The contacts' search split into tasks for numba's threads (:func:`contact_pairs` of a
+    model with a task limit) returns the one-thread search's vertex-triangle and edge pairs
+    in the same order, so the pushes and the bits are the same: a 46 x 46 sheet (4050
+    triangles, above PARALLEL_TRIANGLES) folded onto itself 4 mm apart and jittered."""
+    model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 1.0, 46)])
+    x = model.rest_positions.copy()
+    upper = x[:, 1] > 0.5
+    x[upper, 1], x[upper, 2] = 1.0 - x[upper, 1], 0.004
+    x += np.random.default_rng(3).normal(0.0, 0.002, x.shape)
+    one = self_contact_model(model.rest_positions, model.triangles, 0.005)
+    two = self_contact_model(model.rest_positions, model.triangles, 0.005, threads=2)
+    assert one.task_limit == -1 and two.task_limit == 4050 // (2 * TASKS_PER_THREAD)
+    fit = tree_fit(one, x.shape[0])
+    refit(one.tree, one.triangles, x, fit)
+    limit = np.int64(two.task_limit)
+    bounds = (fit.box, fit.dop, fit.cone)
+    args = (bounds, _COS_CONTACT, 0.02, _BRIDGE, _ROOT, _ROOT, limit, fit.stack)
+    assert descend(two.tree, *args)[1] > 20  # tasks
+    vt, ee = contact_pairs(one, x, fit, 0.02)
+    assert len(vt) > 100 and len(ee) > 100
+    vt_2, ee_2 = contact_pairs(two, x, fit, 0.02)
+    np.testing.assert_array_equal(vt_2, vt)
+    np.testing.assert_array_equal(ee_2, ee)
+
+
 def test_a_flat_sheet_needs_no_leaf_tests_and_a_folded_one_does():
     """A plane sheet is one flat patch: no leaf pair is tested. Folded in half onto itself
     (the upper half turned over, 2 mm above the lower), the halves' patches are tested
@@ -361,7 +393,6 @@ def test_patches_share_a_vertex_exactly_when_their_rims_do():
         set(tris[tree.order[tree.first[k] : tree.first[k] + tree.count[k]]].ravel())
         for k in range(len(tree.first))
     ]
-    stamp, clock = np.zeros(model.n_vertices, np.int64), np.zeros(1, np.int64)
     tested = 0
     for a in range(len(verts)):
         for b in range(len(verts)):
@@ -370,7 +401,7 @@ def test_patches_share_a_vertex_exactly_when_their_rims_do():
             if ta & tb:
                 continue  # nested nodes: the search never pairs them
             expected = bool(verts[a] & verts[b])
-            assert _adjacent(tree.rim_ptr, tree.rim, a, b, stamp, clock) == expected
+            assert _adjacent(tree.rim_ptr, tree.rim, a, b) == expected
             tested += expected
     assert tested > 100
 

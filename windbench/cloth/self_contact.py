@@ -1,9 +1,8 @@
 """Self-collision and cloth-cloth collision: vertices against triangles and edges against
-edges, culled by a bounding-volume hierarchy with normal cones.
-
-The paper's cloth system [MKE03] keeps cloth from passing through itself. All cloths are
-one mesh (:class:`~windbench.cloth.model.ClothModel`): one pass handles a flag folding on
-itself and two flags touching alike. Thickness-based, not continuous: a vertex i closer
+edges, culled by a bounding-volume hierarchy with normal cones. The paper's cloth system
+[MKE03] keeps cloth from passing through itself. All cloths are one mesh
+(:class:`~windbench.cloth.model.ClothModel`): one pass handles a flag folding on itself and
+two flags touching alike. Thickness-based, not continuous: a vertex i closer
 than ``cloth.thickness`` to a triangle (a, b, c) it does not belong to, with its projection
 q = sum_k beta_k x_k inside the triangle, is pushed back to the thickness on the side it
 lay on at the last pass (sign s of its distance to the triangle's plane then):
@@ -33,7 +32,8 @@ overlap itself in that projection, is not tested, as in most cloth solvers: the 
 miss a flat patch that overlaps itself (a twist, a spiral ramp) until it stops being flat.
 They use a narrower cone, CONTACT_CONE: within it, two points of the patch within the
 reach of each other lie within reach / cos(CONTACT_CONE) of each other along the surface,
-neighbours that the thickness test would reject anyway.
+neighbours that the thickness test would reject anyway. Threads search a large cloth's
+subtree pairs at once, with the same result (:func:`contact_pairs`).
 
 The figure :func:`self_intersections` counts intersecting triangle pairs (Moeller-Trumbore)
 through the same hierarchy by its bounds alone, equal to an all-pairs search (cones would
@@ -46,7 +46,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+from numba.typed import List
 
 from windbench.arrays import copy_rows, largest_move
 
@@ -63,6 +64,12 @@ _SQRT2 = math.sqrt(2.0)
 # leaf_pairs' ``bridge`` as np.bool_, not a literal True or False: a literal would compile
 # leaf_pairs once for each
 _BRIDGE, _NO_BRIDGE = np.bool_(True), np.bool_(False)
+# the contacts' search runs on the run's threads from this many triangles (a 64 x 64 cloth
+# has 7938), in tasks of at most 1 / TASKS_PER_THREAD of a thread's share (:func:`contact_pairs`)
+PARALLEL_TRIANGLES = 4000
+TASKS_PER_THREAD = 16
+_ROOT = np.int64(0)
+_LEAVES = np.int64(-1)  # :func:`descend`'s limit that lists leaf pairs
 DOP_SLACK = 1e-9  # m added to the diagonal bounds' gap (:func:`_dops_meet`) against rounding
 
 
@@ -104,6 +111,7 @@ class SelfContact(NamedTuple):
     tree: PatchTree
     ring_ptr: np.ndarray  # (n + 1,) vertex i's neighbours are ring[ring_ptr[i]:ring_ptr[i + 1]]
     ring: np.ndarray  # (2 E,) the other ends of each vertex's edges (:func:`vertex_rings`)
+    task_limit: int  # triangles of a task of the parallel search, or -1 (:func:`task_limit`)
 
 
 class TreeFit(NamedTuple):
@@ -114,8 +122,6 @@ class TreeFit(NamedTuple):
     box: np.ndarray  # (N, 6) lower and upper corners of each patch's box
     dop: np.ndarray  # (N, 12) lower and upper bounds of x+y, x-y, x+z, x-z, y+z, y-z
     cone: np.ndarray  # (N, 5): area-weighted normal sum (3), cos and sin of the half-angle
-    stamp: np.ndarray  # (n,) vertex marks of the adjacency test
-    clock: np.ndarray  # (1,) the last mark
     stack: np.ndarray  # (S, 2) node pairs still to visit
     anchor: np.ndarray  # (n, 3) positions at the last pass (:func:`self_contact_substep`)
     passes: np.ndarray  # (1,) passes in the current frame
@@ -255,12 +261,23 @@ def vertex_rings(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np
     return ptr, np.ascontiguousarray(both[:, 1], np.int64)
 
 
-def self_contact_model(rest, triangles, thickness: float) -> SelfContact:
-    """:class:`SelfContact` with the patch hierarchy of the rest positions."""
+def self_contact_model(rest, triangles, thickness: float, threads: int = 1) -> SelfContact:
+    """:class:`SelfContact` with the patch hierarchy of the rest positions, its contacts
+    searched on ``threads`` threads (:func:`task_limit`)."""
     tri = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     rest = np.asarray(rest, np.float64)
     ring_ptr, ring = vertex_rings(tri, rest.shape[0])
-    return SelfContact(tri, float(thickness), patch_tree(rest, tri), ring_ptr, ring)
+    limit = task_limit(tri.shape[0], threads)
+    return SelfContact(tri, float(thickness), patch_tree(rest, tri), ring_ptr, ring, limit)
+
+
+def task_limit(triangles: int, threads: int) -> int:
+    """The most triangles in a task of the contacts' parallel search (:func:`contact_pairs`):
+    1 / TASKS_PER_THREAD of a thread's share, or -1 (one thread: below PARALLEL_TRIANGLES,
+    where waking the threads costs more than they gain)."""
+    if threads < 2 or triangles < PARALLEL_TRIANGLES:
+        return -1
+    return triangles // (TASKS_PER_THREAD * threads)
 
 
 def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
@@ -271,8 +288,6 @@ def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
         np.zeros((nodes, 6)),
         np.zeros((nodes, 12)),
         np.zeros((nodes, 5)),
-        np.zeros(n_vertices, np.int64),
-        np.zeros(1, np.int64),
         np.zeros((8 * (sc.tree.depth + 2), 2), np.int64),
         np.zeros((n_vertices, 3)),
         np.zeros(1, np.int64),
@@ -419,17 +434,17 @@ def _boxes_meet(box_a, a, box_b, b, gap):
 
 
 @njit(cache=True)
-def _adjacent(rim_ptr, rim, a, b, stamp, clock):
-    """Whether the disjoint patches a and b share a vertex (marks in ``stamp``, clock[0]
-    the last): a shared vertex lies on both rims, each patch holding a triangle of it
-    outside the other, so the rims alone are compared."""
-    clock[0] += 1
-    t = clock[0]
-    for j in range(rim_ptr[a], rim_ptr[a + 1]):
-        stamp[rim[j]] = t
-    for j in range(rim_ptr[b], rim_ptr[b + 1]):
-        if stamp[rim[j]] == t:
+def _adjacent(rim_ptr, rim, a, b):
+    """Whether the disjoint patches a and b share a vertex: a shared vertex lies on both rims,
+    each patch holding a triangle of it outside the other, so the two rims (ascending) are
+    merged. No scratch: the threads of :func:`contact_pairs` call it at once."""
+    i, j = rim_ptr[a], rim_ptr[b]
+    while i < rim_ptr[a + 1] and j < rim_ptr[b + 1]:
+        u, v = rim[i], rim[j]
+        if u == v:
             return True
+        i += u < v
+        j += v < u
     return False
 
 
@@ -466,22 +481,30 @@ def leaf_pairs(tree, fit, cos_flat, gap, bridge):
     vertex and fit in one such cone together, or, with ``bridge``, two leaves that a third
     joins into one (:func:`_bridged`: the contacts; not the search for crossings, where a
     crumple tighter than the thickness crosses itself within such a cone)."""
-    box, dop, cone, stack, stamp, clock = (
-        fit.box,
-        fit.dop,
-        fit.cone,
-        fit.stack,
-        fit.stamp,
-        fit.clock,
-    )
+    bounds = (fit.box, fit.dop, fit.cone)
+    return descend(tree, bounds, cos_flat, gap, bridge, _ROOT, _ROOT, _LEAVES, fit.stack)
+
+
+@njit(cache=True)
+def descend(tree, bounds, cos_flat, gap, bridge, a0, b0, limit, stack):
+    """The depth-first search of :func:`leaf_pairs` from the node pair (a0, b0), with its
+    own ``stack``. A pair of nodes of at most ``limit`` triangles together is listed as it
+    is popped, untested (``limit`` = _LEAVES: none, the leaf pairs are listed): the tasks
+    of :func:`contact_pairs`, in the order in which the whole search would visit them, so
+    that their leaf pairs, one task after the other, are the whole search's in its order.
+    ``bounds``: the patches' (box, dop, cone) (:class:`TreeFit`)."""
+    box, dop, cone = bounds
     count, left, right, connected = tree.count, tree.left, tree.right, tree.connected
     pairs = np.empty((64, 2), np.int64)
     found = np.int64(0)  # not the literal 0: :func:`_append` would be compiled for it too
     top = 1
-    stack[0, 0] = stack[0, 1] = 0
+    stack[0, 0], stack[0, 1] = a0, b0
     while top > 0:
         top -= 1
         a, b = stack[top, 0], stack[top, 1]
+        if count[a] + count[b] <= limit:
+            pairs, found = _append(pairs, found, a, b)
+            continue
         if a == b:
             if connected[a] and cone[a, 3] > cos_flat:
                 continue
@@ -499,7 +522,7 @@ def leaf_pairs(tree, fit, cos_flat, gap, bridge):
                 connected[a]
                 and connected[b]
                 and _union_cos(cone, a, b) > cos_flat
-                and _adjacent(tree.rim_ptr, tree.rim, a, b, stamp, clock)
+                and _adjacent(tree.rim_ptr, tree.rim, a, b)
             ):
                 continue
             if bridge and left[a] < 0 and left[b] < 0 and _bridged(tree, cone, a, b, cos_flat):
@@ -513,6 +536,59 @@ def leaf_pairs(tree, fit, cos_flat, gap, bridge):
                 continue
         pairs, found = _append(pairs, found, a, b)
     return pairs, found
+
+
+@njit(cache=True)
+def contact_pairs(sc, p, fit, reach):
+    """:func:`close_pairs` of the contacts' :func:`leaf_pairs` within ``reach``: on one
+    thread, or, when the model has a task limit (:func:`task_limit`), split into the tasks
+    of :func:`descend` searched by numba's threads one task at a time
+    (:func:`_task_pairs`) and joined in the task order: the same pairs in the same order
+    either way, so the same pushes and the same bits."""
+    if sc.task_limit < 0:
+        pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, _BRIDGE)
+        return close_pairs(sc, p, fit.box, pairs, found, reach)
+    bounds, limit = (fit.box, fit.dop, fit.cone), np.int64(sc.task_limit)
+    tasks, n = descend(
+        sc.tree, bounds, _COS_CONTACT, reach, _BRIDGE, _ROOT, _ROOT, limit, fit.stack
+    )
+    return _task_pairs(sc, p, fit, tasks, n, reach)
+
+
+@njit(cache=True, parallel=True)
+def _task_pairs(sc, p, fit, tasks, n, reach):
+    """The close pairs of each task tasks[:n] of :func:`contact_pairs` (a parallel loop,
+    one task per iteration, each with its own stack), joined in the task order."""
+    vt_parts, ee_parts = List(), List()
+    for _ in range(n):
+        vt_parts.append(np.empty((0, 2), np.int64))
+        ee_parts.append(np.empty((0, 2), np.int64))
+    box, dop, cone, stack, triangles = fit.box, fit.dop, fit.cone, fit.stack, sc.triangles
+    eb = _edge_boxes(p, sc.tree.leaf_edge)
+    # a parallel loop takes arrays and scalars, no tuples: the tree is packed again in it
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16 = sc.tree
+    for t in prange(n):
+        tree = PatchTree(t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16)
+        a, b, own = tasks[t, 0], tasks[t, 1], np.empty_like(stack)
+        bounds = (box, dop, cone)
+        pairs, found = descend(tree, bounds, _COS_CONTACT, reach, _BRIDGE, a, b, _LEAVES, own)
+        vt_parts[t] = _close_vertices(tree, triangles, p, box, pairs, found, reach)
+        ee_parts[t] = _close_edges(tree, p, box, eb, pairs, found, reach)
+    return _joined(vt_parts), _joined(ee_parts)
+
+
+@njit(cache=True)
+def _joined(parts):
+    """The (K_i, 2) arrays of the list ``parts`` stacked in order."""
+    total = 0
+    for part in parts:
+        total += part.shape[0]
+    out = np.empty((total, 2), np.int64)
+    n = 0
+    for part in parts:
+        out[n : n + part.shape[0]] = part
+        n += part.shape[0]
+    return out
 
 
 @njit(cache=True)
@@ -735,16 +811,16 @@ def close_pairs(sc, p, box, pairs, found, reach):
     ``reach`` at inner points. Found in loops of plain arrays and scalar tests, and pushed
     apart after them (:func:`self_contacts`): a call inside a search loop would cost
     reference counts on every pass."""
+    eb = _edge_boxes(p, sc.tree.leaf_edge)
     return (
-        _close_vertices(sc, p, box, pairs, found, reach),
-        _close_edges(sc.tree, p, box, pairs, found, reach),
+        _close_vertices(sc.tree, sc.triangles, p, box, pairs, found, reach),
+        _close_edges(sc.tree, p, box, eb, pairs, found, reach),
     )
 
 
 @njit(cache=True)
-def _close_vertices(sc, p, box, pairs, found, reach):
+def _close_vertices(tree, triangles, p, box, pairs, found, reach):
     """The vertex-triangle pairs of :func:`close_pairs`."""
-    tree, triangles = sc.tree, sc.triangles
     order, first, count = tree.order, tree.first, tree.count
     vert_ptr, leaf_vert = tree.vert_ptr, tree.leaf_vert
     vt = np.empty((64, 2), np.int64)
@@ -768,12 +844,11 @@ def _close_vertices(sc, p, box, pairs, found, reach):
 
 
 @njit(cache=True)
-def _close_edges(tree, p, box, pairs, found, reach):
-    """The edge pairs of :func:`close_pairs`, their boxes computed once
+def _close_edges(tree, p, box, eb, pairs, found, reach):
+    """The edge pairs of :func:`close_pairs`, with the edges' boxes ``eb`` computed once
     (:func:`_edge_boxes`): an edge's box against the other patch's, then against each of
     its edges', then the closest points."""
     edge_ptr, edges = tree.edge_ptr, tree.leaf_edge
-    eb = _edge_boxes(p, edges)
     ee = np.empty((64, 2), np.int64)
     n_ee = np.int64(0)  # as in :func:`_close_vertices`
     for q in range(found):
@@ -806,8 +881,7 @@ def self_contacts(sc, inv_mass, p, x0, fit):
     largest = moves.max()  # there are triangles, so vertices
     reach = pair_reach(largest, largest, thickness)
     refit(sc.tree, triangles, p, fit)
-    pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, _BRIDGE)
-    vt, ee = close_pairs(sc, p, fit.box, pairs, found, reach)
+    vt, ee = contact_pairs(sc, p, fit, reach)
     pushed = 0
     for q in range(vt.shape[0]):
         f = vt[q, 1]

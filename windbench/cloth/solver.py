@@ -46,6 +46,7 @@ import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numba import njit
 
@@ -675,7 +676,9 @@ class XPBDCloth:
             constraint_tables(model, self.topology, k, s),
             contacts,
             Settings(s.substeps, s.edge_iterations, s.strain_limit, s.limit_passes),
-            self_contact_model(model.rest_positions, model.triangles, s.thickness),
+            self_contact_model(
+                model.rest_positions, model.triangles, s.thickness, numba.get_num_threads()
+            ),
             contacts._replace(
                 boxes=surface_boxes(contacts.bodies, contacts.boxes, rest, triangles)
             ),
