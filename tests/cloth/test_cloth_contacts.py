@@ -217,12 +217,13 @@ def _brute_force_crossings(triangles, x):
 def test_the_patch_hierarchy_counts_the_crossings_a_brute_force_search_finds(seed):
     """Culling by boxes and 90-degree normal cones loses no crossing pair: the count equals
     the all-pairs search on randomly crumpled sheets (which cross themselves in many
-    places)."""
+    places), on one thread and split into tasks of at most 8 triangles for the threads."""
     model, x = _crumpled(seed=seed)
     sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
     expected = _brute_force_crossings(sc.triangles, x)
     assert expected > 5
     assert self_intersections(sc, x) == expected
+    assert self_intersections(sc._replace(task_limit=8), x) == expected
 
 
 def test_the_threads_find_the_serial_search_pairs_in_its_order():

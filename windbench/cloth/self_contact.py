@@ -1021,11 +1021,10 @@ def _one_side(p, f, g):
 
 
 @njit(cache=True)
-def _crossing_candidates(sc, p, pairs, found):
+def _crossing_candidates(tree, triangles, p, pairs, found):
     """(K, 2) triangle pairs of the leaf pairs ``pairs[:found]`` without a common vertex,
     whose boxes meet and neither of which lies on one side of the other's plane, in a loop
     of plain arrays and scalar tests (the segment tests come after it)."""
-    tree, triangles = sc.tree, sc.triangles
     out = np.empty((64, 2), np.int64)
     n = np.int64(0)  # as in :func:`_close_vertices`
     for q in range(found):
@@ -1053,7 +1052,42 @@ def _crossing_count(sc, p, fit):
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
     pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, 0.0, _NO_BRIDGE)
-    candidates = _crossing_candidates(sc, p, pairs, found)
+    return _crossings(sc.tree, triangles, p, pairs, found)
+
+
+@njit(cache=True)
+def _threaded_crossing_count(sc, p, fit):
+    """:func:`_crossing_count` split into the tasks of :func:`descend` (the model's task
+    limit) that the threads count at once (:func:`_task_crossings`): the same sum. A
+    separate entry point, so that a run that never takes it never compiles it."""
+    refit(sc.tree, sc.triangles, p, fit)
+    bounds, limit = (fit.box, fit.dop, fit.cone), np.int64(sc.task_limit)
+    tasks, n = descend(
+        sc.tree, bounds, _NEVER_FLAT, 0.0, _NO_BRIDGE, _ROOT, _ROOT, limit, fit.stack
+    )
+    return _task_crossings(sc, p, fit, tasks, n)
+
+
+@njit(cache=True, parallel=True)
+def _task_crossings(sc, p, fit, tasks, n):
+    """The intersecting triangle pairs of the tasks tasks[:n] of :func:`_crossing_count`,
+    summed over a parallel loop (one task per iteration, each with its own stack)."""
+    box, dop, cone, stack, triangles = fit.box, fit.dop, fit.cone, fit.stack, sc.triangles
+    # a parallel loop takes arrays and scalars, no tuples: the tree is packed again in it
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16 = sc.tree
+    count = 0
+    for t in prange(n):
+        tree = PatchTree(t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16)
+        a, b, own, bounds = tasks[t, 0], tasks[t, 1], np.empty_like(stack), (box, dop, cone)
+        pairs, found = descend(tree, bounds, _NEVER_FLAT, 0.0, _NO_BRIDGE, a, b, _LEAVES, own)
+        count += _crossings(tree, triangles, p, pairs, found)
+    return count
+
+
+@njit(cache=True)
+def _crossings(tree, triangles, p, pairs, found):
+    """The intersecting triangle pairs within the leaf pairs ``pairs[:found]``."""
+    candidates = _crossing_candidates(tree, triangles, p, pairs, found)
     count = 0
     for q in range(candidates.shape[0]):
         f, g = candidates[q, 0], candidates[q, 1]
@@ -1230,7 +1264,7 @@ def _crossing_edges(sc, p, fit):
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
     pairs, found = leaf_pairs(sc.tree, fit, _COS_UNTANGLE, 0.0, _NO_BRIDGE)
-    candidates = _crossing_candidates(sc, p, pairs, found)
+    candidates = _crossing_candidates(sc.tree, triangles, p, pairs, found)
     rows = np.empty((max(1, 6 * candidates.shape[0]), 4), np.int64)
     depth = np.empty(rows.shape[0])
     n = 0
@@ -1264,8 +1298,9 @@ def _take_back(sc, inv_mass, p, rows, r, clearance):
 
 def self_intersections(sc: SelfContact, positions) -> int:
     """The number of intersecting pairs of triangles without a common vertex (module
-    docstring), all cloths together."""
+    docstring), all cloths together; on the threads with a task limit (:func:`task_limit`)."""
     if sc.triangles.shape[0] < 2:
         return 0
     x = np.ascontiguousarray(positions, dtype=np.float64)
-    return int(_crossing_count(sc, x, tree_fit(sc, x.shape[0])))
+    count = _crossing_count if sc.task_limit < 0 else _threaded_crossing_count
+    return int(count(sc, x, tree_fit(sc, x.shape[0])))
