@@ -242,7 +242,7 @@ def test_the_threads_find_the_serial_search_pairs_in_its_order():
     fit = tree_fit(one, x.shape[0])
     refit(one.tree, one.triangles, x, fit)
     limit = np.int64(two.task_limit)
-    bounds = (fit.box, fit.dop, fit.cone)
+    bounds = (fit.box, fit.dop, fit.cone, fit.live)
     args = (bounds, _COS_CONTACT, 0.02, _BRIDGE, _ROOT, _ROOT, limit, fit.stack)
     assert descend(two.tree, *args)[1] > 20  # tasks
     vt, ee = contact_pairs(one, x, fit, 0.02)

@@ -126,6 +126,8 @@ class TreeFit(NamedTuple):
     anchor: np.ndarray  # (n, 3) positions at the last pass (:func:`self_contact_substep`)
     passes: np.ndarray  # (1,) passes in the current frame
     moves: np.ndarray  # (n,) each vertex's move since the last pass (:func:`vertex_moves`)
+    live: np.ndarray  # (N,) bool: the patches a search starts from (:func:`descend`)
+    pushed: np.ndarray  # (n,) bool: the vertices a pass moved (:func:`self_contact_substep`)
 
 
 def _split(centroid, order, lo, hi, nodes, depth):
@@ -292,6 +294,8 @@ def tree_fit(sc: SelfContact, n_vertices: int) -> TreeFit:
         np.zeros((n_vertices, 3)),
         np.zeros(1, np.int64),
         np.zeros(n_vertices),
+        np.ones(nodes, np.bool_),
+        np.zeros(n_vertices, np.bool_),
     )
 
 
@@ -481,7 +485,7 @@ def leaf_pairs(tree, fit, cos_flat, gap, bridge):
     vertex and fit in one such cone together, or, with ``bridge``, two leaves that a third
     joins into one (:func:`_bridged`: the contacts; not the search for crossings, where a
     crumple tighter than the thickness crosses itself within such a cone)."""
-    bounds = (fit.box, fit.dop, fit.cone)
+    bounds = (fit.box, fit.dop, fit.cone, fit.live)
     return descend(tree, bounds, cos_flat, gap, bridge, _ROOT, _ROOT, _LEAVES, fit.stack)
 
 
@@ -492,8 +496,9 @@ def descend(tree, bounds, cos_flat, gap, bridge, a0, b0, limit, stack):
     is popped, untested (``limit`` = _LEAVES: none, the leaf pairs are listed): the tasks
     of :func:`contact_pairs`, in the order in which the whole search would visit them, so
     that their leaf pairs, one task after the other, are the whole search's in its order.
-    ``bounds``: the patches' (box, dop, cone) (:class:`TreeFit`)."""
-    box, dop, cone = bounds
+    ``bounds``: the patches' (box, dop, cone, live) (:class:`TreeFit`): a pair of which
+    no patch is live is skipped."""
+    box, dop, cone, live = bounds
     count, left, right, connected = tree.count, tree.left, tree.right, tree.connected
     pairs = np.empty((64, 2), np.int64)
     found = np.int64(0)  # not the literal 0: :func:`_append` would be compiled for it too
@@ -502,6 +507,8 @@ def descend(tree, bounds, cos_flat, gap, bridge, a0, b0, limit, stack):
     while top > 0:
         top -= 1
         a, b = stack[top, 0], stack[top, 1]
+        if not (live[a] or live[b]):
+            continue
         if count[a] + count[b] <= limit:
             pairs, found = _append(pairs, found, a, b)
             continue
@@ -548,7 +555,7 @@ def contact_pairs(sc, p, fit, reach):
     if sc.task_limit < 0:
         pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, _BRIDGE)
         return close_pairs(sc, p, fit.box, pairs, found, reach)
-    bounds, limit = (fit.box, fit.dop, fit.cone), np.int64(sc.task_limit)
+    bounds, limit = (fit.box, fit.dop, fit.cone, fit.live), np.int64(sc.task_limit)
     tasks, n = descend(
         sc.tree, bounds, _COS_CONTACT, reach, _BRIDGE, _ROOT, _ROOT, limit, fit.stack
     )
@@ -563,14 +570,15 @@ def _task_pairs(sc, p, fit, tasks, n, reach):
     for _ in range(n):
         vt_parts.append(np.empty((0, 2), np.int64))
         ee_parts.append(np.empty((0, 2), np.int64))
-    box, dop, cone, stack, triangles = fit.box, fit.dop, fit.cone, fit.stack, sc.triangles
+    box, dop, cone, live, stack = fit.box, fit.dop, fit.cone, fit.live, fit.stack
+    triangles = sc.triangles
     eb = _edge_boxes(p, sc.tree.leaf_edge)
     # a parallel loop takes arrays and scalars, no tuples: the tree is packed again in it
     t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16 = sc.tree
     for t in prange(n):
         tree = PatchTree(t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16)
         a, b, own = tasks[t, 0], tasks[t, 1], np.empty_like(stack)
-        bounds = (box, dop, cone)
+        bounds = (box, dop, cone, live)
         pairs, found = descend(tree, bounds, _COS_CONTACT, reach, _BRIDGE, a, b, _LEAVES, own)
         vt_parts[t] = _close_vertices(tree, triangles, p, box, pairs, found, reach)
         ee_parts[t] = _close_edges(tree, p, box, eb, pairs, found, reach)
@@ -886,12 +894,38 @@ def self_contacts(sc, inv_mass, p, x0, fit):
     for q in range(vt.shape[0]):
         f = vt[q, 1]
         tri = (triangles[f, 0], triangles[f, 1], triangles[f, 2])
-        pushed += push_vertex(p, x0, inv_mass, vt[q, 0], tri, thickness, moves) < 0.0
+        if push_vertex(p, x0, inv_mass, vt[q, 0], tri, thickness, moves) < 0.0:
+            pushed += 1
+            _mark(fit.pushed, vt[q, 0], tri[0], tri[1], tri[2])
     for q in range(ee.shape[0]):
         e, g = ee[q, 0], ee[q, 1]
         i, j, k, l = edges[e, 0], edges[e, 1], edges[g, 0], edges[g, 1]
-        pushed += push_edges(p, x0, inv_mass, i, j, k, l, thickness, moves) < 0.0
+        if push_edges(p, x0, inv_mass, i, j, k, l, thickness, moves) < 0.0:
+            pushed += 1
+            _mark(fit.pushed, i, j, k, l)
     return pushed
+
+
+@njit(cache=True)
+def _mark(flags, i, j, k, l):
+    """flags[i], flags[j], flags[k], flags[l] = True."""
+    flags[i] = flags[j] = flags[k] = flags[l] = True
+
+
+@njit(cache=True)
+def live_patches(tree, pushed, live):
+    """``live`` set for the patches that hold a ``pushed`` vertex (leaves by their corners,
+    inner nodes by their children), and cleared for the others."""
+    left, right, ptr, corners = tree.left, tree.right, tree.corner_ptr, tree.leaf_corner
+    for k in range(left.shape[0] - 1, -1, -1):
+        if left[k] >= 0:
+            live[k] = live[left[k]] or live[right[k]]
+            continue
+        live[k] = False
+        for j in range(ptr[k], ptr[k + 1]):
+            if pushed[corners[j]]:
+                live[k] = True
+                break
 
 
 @njit(cache=True)
@@ -941,12 +975,17 @@ def self_contact_substep(sc, inv_mass, p, xp, fit, last):
     reach when the pass searched (a layer pushed off the one above it, into the one
     below), and only a new search finds that. Without it, a quad of two_flags_wall's
     sheltered flag folded flat about its diagonal left its layers crossed for the rest of
-    the run."""
+    the run. The new search starts from the patches that hold a pushed vertex
+    (:func:`live_patches`): a pair none of whose vertices moved tests as it did."""
     if pass_due(p, xp, fit.anchor, sc.thickness, last):
+        fit.pushed[:] = False
         for _ in range(PASS_SWEEPS):
             fit.passes[0] += 1
             if self_contacts(sc, inv_mass, p, fit.anchor, fit) == 0:
                 break
+            live_patches(sc.tree, fit.pushed, fit.live)
+            fit.pushed[:] = False
+        fit.live[:] = True
         copy_rows(fit.anchor, p, p.shape[0])
 
 
@@ -1061,7 +1100,7 @@ def _threaded_crossing_count(sc, p, fit):
     limit) that the threads count at once (:func:`_task_crossings`): the same sum. A
     separate entry point, so that a run that never takes it never compiles it."""
     refit(sc.tree, sc.triangles, p, fit)
-    bounds, limit = (fit.box, fit.dop, fit.cone), np.int64(sc.task_limit)
+    bounds, limit = (fit.box, fit.dop, fit.cone, fit.live), np.int64(sc.task_limit)
     tasks, n = descend(
         sc.tree, bounds, _NEVER_FLAT, 0.0, _NO_BRIDGE, _ROOT, _ROOT, limit, fit.stack
     )
@@ -1072,13 +1111,14 @@ def _threaded_crossing_count(sc, p, fit):
 def _task_crossings(sc, p, fit, tasks, n):
     """The intersecting triangle pairs of the tasks tasks[:n] of :func:`_crossing_count`,
     summed over a parallel loop (one task per iteration, each with its own stack)."""
-    box, dop, cone, stack, triangles = fit.box, fit.dop, fit.cone, fit.stack, sc.triangles
+    box, dop, cone, live, stack = fit.box, fit.dop, fit.cone, fit.live, fit.stack
+    triangles = sc.triangles
     # a parallel loop takes arrays and scalars, no tuples: the tree is packed again in it
     t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16 = sc.tree
     count = 0
     for t in prange(n):
         tree = PatchTree(t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16)
-        a, b, own, bounds = tasks[t, 0], tasks[t, 1], np.empty_like(stack), (box, dop, cone)
+        a, b, own, bounds = tasks[t, 0], tasks[t, 1], np.empty_like(stack), (box, dop, cone, live)
         pairs, found = descend(tree, bounds, _NEVER_FLAT, 0.0, _NO_BRIDGE, a, b, _LEAVES, own)
         count += _crossings(tree, triangles, p, pairs, found)
     return count
