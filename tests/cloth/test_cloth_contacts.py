@@ -26,6 +26,7 @@ from windbench.cloth.self_contact import (
     contact_pairs,
     descend,
     leaf_pairs,
+    live_patches,
     pair_reach,
     pass_due,
     patch_tree,
@@ -250,6 +251,34 @@ def test_the_threads_find_the_serial_search_pairs_in_its_order():
     vt_2, ee_2 = contact_pairs(two, x, fit, 0.02)
     np.testing.assert_array_equal(vt_2, vt)
     np.testing.assert_array_equal(ee_2, ee)
+
+
+def test_a_search_from_the_pushed_patches_finds_every_pair_with_a_pushed_vertex():
+    """:func:`live_patches` marks exactly the patches that hold a pushed vertex, and the
+    search from them (a pass's second sweep) finds every close pair of the whole search
+    that has a pushed vertex, and fewer pairs in all: a sheet folded onto itself."""
+    model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 1.0, 17)])
+    x = model.rest_positions.copy()
+    upper = x[:, 1] > 0.5
+    x[upper, 1], x[upper, 2] = 1.0 - x[upper, 1], 0.004
+    sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
+    fit = tree_fit(sc, x.shape[0])
+    refit(sc.tree, sc.triangles, x, fit)
+    vt, ee = contact_pairs(sc, x, fit, 0.02)
+    pushed = np.zeros(x.shape[0], np.bool_)
+    pushed[np.random.default_rng(5).choice(x.shape[0], 12, replace=False)] = True
+    live_patches(sc.tree, pushed, fit.live)
+    tree, tri, edges = sc.tree, sc.triangles, sc.tree.leaf_edge
+    for k in range(len(tree.first)):
+        own = tri[tree.order[tree.first[k] : tree.first[k] + tree.count[k]]]
+        assert fit.live[k] == pushed[own].any()
+    vt_2, ee_2 = contact_pairs(sc, x, fit, 0.02)
+    want_vt = {(i, f) for i, f in vt.tolist() if pushed[i] or pushed[tri[f]].any()}
+    want_ee = {(e, g) for e, g in ee.tolist() if pushed[edges[[e, g]]].any()}
+    assert want_vt and want_ee
+    assert want_vt <= set(map(tuple, vt_2.tolist()))
+    assert want_ee <= set(map(tuple, ee_2.tolist()))
+    assert len(vt_2) + len(ee_2) < len(vt) + len(ee)
 
 
 def test_a_flat_sheet_needs_no_leaf_tests_and_a_folded_one_does():

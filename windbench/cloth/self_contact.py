@@ -976,7 +976,8 @@ def self_contact_substep(sc, inv_mass, p, xp, fit, last):
     below), and only a new search finds that. Without it, a quad of two_flags_wall's
     sheltered flag folded flat about its diagonal left its layers crossed for the rest of
     the run. The new search starts from the patches that hold a pushed vertex
-    (:func:`live_patches`): a pair none of whose vertices moved tests as it did."""
+    (:func:`live_patches`): a pair none of whose vertices the pushes moved is where the
+    first search left it."""
     if pass_due(p, xp, fit.anchor, sc.thickness, last):
         fit.pushed[:] = False
         for _ in range(PASS_SWEEPS):
@@ -1109,7 +1110,8 @@ def _threaded_crossing_count(sc, p, fit):
 
 @njit(cache=True, parallel=True)
 def _task_crossings(sc, p, fit, tasks, n):
-    """The intersecting triangle pairs of the tasks tasks[:n] of :func:`_crossing_count`,
+    """The intersecting triangle pairs of the tasks tasks[:n] of
+    :func:`_threaded_crossing_count`,
     summed over a parallel loop (one task per iteration, each with its own stack)."""
     box, dop, cone, live, stack = fit.box, fit.dop, fit.cone, fit.live, fit.stack
     triangles = sc.triangles
