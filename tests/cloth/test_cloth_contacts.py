@@ -218,13 +218,13 @@ def _brute_force_crossings(triangles, x):
 def test_the_patch_hierarchy_counts_the_crossings_a_brute_force_search_finds(seed):
     """Culling by boxes and 90-degree normal cones loses no crossing pair: the count equals
     the all-pairs search on randomly crumpled sheets (which cross themselves in many
-    places), on one thread and split into tasks of at most 8 triangles for the threads."""
+    places), on one thread and split into tasks for two threads."""
     model, x = _crumpled(seed=seed)
     sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
     expected = _brute_force_crossings(sc.triangles, x)
     assert expected > 5
     assert self_intersections(sc, x) == expected
-    assert self_intersections(sc._replace(task_limit=8), x) == expected
+    assert self_intersections(sc._replace(threads=2), x) == expected
 
 
 def test_the_threads_find_the_serial_search_pairs_in_its_order():
@@ -239,10 +239,10 @@ def test_the_threads_find_the_serial_search_pairs_in_its_order():
     x += np.random.default_rng(3).normal(0.0, 0.002, x.shape)
     one = self_contact_model(model.rest_positions, model.triangles, 0.005)
     two = self_contact_model(model.rest_positions, model.triangles, 0.005, threads=2)
-    assert one.task_limit == -1 and two.task_limit == 4050 // (2 * TASKS_PER_THREAD)
+    assert one.threads == 1 and two.threads == 2
     fit = tree_fit(one, x.shape[0])
     refit(one.tree, one.triangles, x, fit)
-    limit = np.int64(two.task_limit)
+    limit = np.int64(4050 // (2 * TASKS_PER_THREAD))
     bounds = (fit.box, fit.dop, fit.cone, fit.live)
     args = (bounds, _COS_CONTACT, 0.02, _BRIDGE, _ROOT, _ROOT, limit, fit.stack)
     assert descend(two.tree, *args)[1] > 20  # tasks
