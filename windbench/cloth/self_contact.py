@@ -64,6 +64,7 @@ _SQRT2 = math.sqrt(2.0)
 # leaf_pairs' ``bridge`` as np.bool_, not a literal True or False: a literal would compile
 # leaf_pairs once for each
 _BRIDGE, _NO_BRIDGE = np.bool_(True), np.bool_(False)
+_CROSSINGS, _CONTACTS = np.bool_(True), np.bool_(False)  # what :func:`_task_search` seeks
 # the contacts' search runs on the run's threads from this many triangles (a 64 x 64 cloth
 # has 7938), in tasks of at most 1 / TASKS_PER_THREAD of a thread's share (:func:`contact_pairs`)
 PARALLEL_TRIANGLES = 4000
@@ -555,7 +556,7 @@ def contact_pairs(sc, p, fit, reach):
     """:func:`close_pairs` of the contacts' :func:`leaf_pairs` within ``reach``: on one
     thread, or, for a model searched on threads (:func:`search_threads`), split into the tasks
     of :func:`descend` searched by numba's threads one task at a time
-    (:func:`_task_pairs`) and joined in the task order: the same pairs in the same order
+    (:func:`_task_search`) and joined in the task order: the same pairs in the same order
     either way, so the same pushes and the same bits."""
     if sc.threads < 2:
         pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, _BRIDGE)
@@ -564,23 +565,29 @@ def contact_pairs(sc, p, fit, reach):
     tasks, n = descend(
         sc.tree, bounds, _COS_CONTACT, reach, _BRIDGE, _ROOT, _ROOT, limit, fit.stack
     )
-    return _task_pairs(sc, p, fit, tasks, n, reach)
+    vt, ee, _ = _task_search(sc, p, fit, tasks, n, reach, _CONTACTS)
+    return vt, ee
 
 
 @njit(cache=True, parallel=True)
-def _task_pairs(sc, p, fit, tasks, n, reach):
-    """The close pairs of each task tasks[:n] of :func:`contact_pairs`, joined in the task
-    order: a parallel loop over the model's threads, thread w taking tasks w, w + T,
-    w + 2 T, ... (T threads, each with its own stack). Dealt out so, neighbouring tasks,
-    which cost alike (a fold is one patch of the cloth), go to different threads: in
-    contiguous halves the first held 82 % of a flapping 64 x 64 flag's leaf pairs."""
+def _task_search(sc, p, fit, tasks, n, reach, crossings):
+    """(vertex-triangle pairs, edge pairs, crossings) of the tasks tasks[:n] of
+    :func:`descend`, searched in a parallel loop over the model's threads, thread w of T
+    taking tasks w, w + T, w + 2 T, ... with its own stack: with ``crossings``, the
+    intersecting triangle pairs of :func:`_threaded_crossing_count` (boxes alone, gap 0),
+    summed; else the close pairs within ``reach`` of :func:`contact_pairs`, joined in the
+    task order. Dealt out so, neighbouring tasks, which cost alike (a fold is one patch of
+    the cloth), go to different threads: in contiguous halves the first held 82 % of a
+    flapping 64 x 64 flag's leaf pairs."""
     vt_parts, ee_parts = List(), List()
     for _ in range(n):
         vt_parts.append(np.empty((0, 2), np.int64))
         ee_parts.append(np.empty((0, 2), np.int64))
     box, dop, cone, live, stack = fit.box, fit.dop, fit.cone, fit.live, fit.stack
-    triangles, workers = sc.triangles, sc.threads
-    eb = _edge_boxes(p, sc.tree.leaf_edge)
+    triangles, workers, edges = sc.triangles, sc.threads, sc.tree.leaf_edge
+    cos_flat, bridge = (_NEVER_FLAT, _NO_BRIDGE) if crossings else (_COS_CONTACT, _BRIDGE)
+    eb = _edge_boxes(p, edges[:0] if crossings else edges)
+    counts = np.zeros(workers, np.int64)
     # a parallel loop takes arrays and scalars, no tuples: the tree is packed again in it
     t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16 = sc.tree
     for w in prange(workers):
@@ -588,10 +595,13 @@ def _task_pairs(sc, p, fit, tasks, n, reach):
         own, bounds = np.empty_like(stack), (box, dop, cone, live)
         for t in range(w, n, workers):
             a, b = tasks[t, 0], tasks[t, 1]
-            pairs, found = descend(tree, bounds, _COS_CONTACT, reach, _BRIDGE, a, b, _LEAVES, own)
-            vt_parts[t] = _close_vertices(tree, triangles, p, box, pairs, found, reach)
-            ee_parts[t] = _close_edges(tree, p, box, eb, pairs, found, reach)
-    return _joined(vt_parts), _joined(ee_parts)
+            pairs, found = descend(tree, bounds, cos_flat, reach, bridge, a, b, _LEAVES, own)
+            if crossings:
+                counts[w] += _crossings(tree, triangles, p, pairs, found)
+            else:
+                vt_parts[t] = _close_vertices(tree, triangles, p, box, pairs, found, reach)
+                ee_parts[t] = _close_edges(tree, p, box, eb, pairs, found, reach)
+    return _joined(vt_parts), _joined(ee_parts), counts.sum()
 
 
 @njit(cache=True)
@@ -1107,34 +1117,14 @@ def _crossing_count(sc, p, fit):
 @njit(cache=True)
 def _threaded_crossing_count(sc, p, fit):
     """:func:`_crossing_count` split into the tasks of :func:`descend` (the model's task
-    limit) that the threads count at once (:func:`_task_crossings`): the same sum. A
+    limit) that the threads count at once (:func:`_task_search`): the same sum. A
     separate entry point, so that a run that never takes it never compiles it."""
     refit(sc.tree, sc.triangles, p, fit)
     bounds, limit = (fit.box, fit.dop, fit.cone, fit.live), _task_limit(sc)
     tasks, n = descend(
         sc.tree, bounds, _NEVER_FLAT, 0.0, _NO_BRIDGE, _ROOT, _ROOT, limit, fit.stack
     )
-    return _task_crossings(sc, p, fit, tasks, n)
-
-
-@njit(cache=True, parallel=True)
-def _task_crossings(sc, p, fit, tasks, n):
-    """The intersecting triangle pairs of the tasks tasks[:n] of
-    :func:`_threaded_crossing_count`, summed: the tasks dealt out to the model's threads
-    as in :func:`_task_pairs`."""
-    box, dop, cone, live, stack = fit.box, fit.dop, fit.cone, fit.live, fit.stack
-    triangles, workers = sc.triangles, sc.threads
-    counts = np.zeros(workers, np.int64)
-    # a parallel loop takes arrays and scalars, no tuples: the tree is packed again in it
-    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16 = sc.tree
-    for w in prange(workers):
-        tree = PatchTree(t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16)
-        own, bounds = np.empty_like(stack), (box, dop, cone, live)
-        for t in range(w, n, workers):
-            a, b = tasks[t, 0], tasks[t, 1]
-            pairs, found = descend(tree, bounds, _NEVER_FLAT, 0.0, _NO_BRIDGE, a, b, _LEAVES, own)
-            counts[w] += _crossings(tree, triangles, p, pairs, found)
-    return counts.sum()
+    return _task_search(sc, p, fit, tasks, n, 0.0, _CROSSINGS)[2]
 
 
 @njit(cache=True)
