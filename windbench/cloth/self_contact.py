@@ -999,9 +999,9 @@ def self_contact_substep(sc, inv_mass, p, xp, fit, last):
     first search left it."""
     if pass_due(p, xp, fit.anchor, sc.thickness, last):
         fit.pushed[:] = False
-        for _ in range(PASS_SWEEPS):
+        for sweep in range(PASS_SWEEPS):
             fit.passes[0] += 1
-            if self_contacts(sc, inv_mass, p, fit.anchor, fit) == 0:
+            if self_contacts(sc, inv_mass, p, fit.anchor, fit) == 0 or sweep == PASS_SWEEPS - 1:
                 break
             live_patches(sc.tree, fit.pushed, fit.live)
             fit.pushed[:] = False

@@ -340,7 +340,8 @@ def xpbd_frame(model, frame, x, v, f_ext, out, work):
     Inputs x, v, f_ext (n, 3); outputs ``out`` = (x_out, v_out); ``work`` = the
     :class:`Workspace` arrays in field order (x scratch (n, 3), multipliers (E,), chain
     scratch (S, 5), strain-limit flags, contact clearances, strain-limit clocks, parts
-    near the bodies, patch fit). Returns (W, K, finite) of :func:`_frame_figures` for the new state.
+    near the bodies, patch fit). Returns (W, K, finite) of :func:`_frame_figures` for the
+    new state.
     """
     c, s = model.constraints, model.settings
     h = frame.dt / s.substeps
