@@ -5,28 +5,37 @@ step of ``../shared/baselines/nb_fluid.py`` (``--solver mgpcg --pdtype f64``) me
 the same run.
 
     PYTHONPATH=. python experiments/bench_ns.py [--resolutions 64 128] [--steps 10]
-        [--rounds 2] [--precisions float64 float32] [--advection semi_lagrangian second_order]
-        [--no-baseline] [--set "KEY=VALUE ..." ...] [--out CSV]
+        [--settle 60] [--rounds 2] [--precisions float64 float32]
+        [--advection semi_lagrangian second_order] [--no-baseline] [--set "KEY=VALUE ..." ...] [--out CSV]
     PYTHONPATH=. python experiments/bench_ns.py --validation
 
 
 Writes experiments/results/bench_ns.csv: one row per resolution, precision and advection
-scheme (medians over the timed steps after two warm-up steps) with ``baseline_seconds`` and
-``ratio_to_baseline`` (the baseline as it ships: numba's default OpenMP wait, whose
-spinning threads start each parallel loop sooner) and ``baseline_passive_seconds`` and
-``ratio_to_baseline_passive`` (the baseline under windbench's passive wait policy, which
-this process runs under; the two differ most on small grids). ``--set`` adds variants of
-further overrides (column ``overrides``; ``""``: none). The variants of one resolution
-are stepped in turn (A, B, A, B, ...), so that a change in the machine's load hits them
-alike, and the steps are split into ``--rounds`` rounds, each followed by one run of the
-baseline each way: the baseline figures are the medians of those runs (each run's in
-``baseline_rounds`` and ``baseline_passive_rounds``), so that a drift of the machine's
-speed over the minutes of a run (the same step took 28 to 40 ms at 64^3 within an hour
-here) hits windbench and the baseline alike. The load average (``uptime``) is printed
-and recorded, since the machine's 2 cores are shared. ``setup_seconds``
-(backend construction, incl. loading or compiling the numba kernels) and
-``first_step_seconds`` are reported separately; run the script twice to see cached-compile
-figures (numba cache=True).
+scheme (medians over the timed steps, after two warm-up steps and the settling ones)
+with ``baseline_seconds`` and ``ratio_to_baseline`` (the baseline as it ships: numba's
+default OpenMP wait, whose spinning threads start each parallel loop sooner) and
+``baseline_passive_seconds`` and ``ratio_to_baseline_passive`` (the baseline under
+windbench's passive wait policy, which this process runs under; the two differ most on
+small grids). ``--set`` adds variants of further overrides (column ``overrides``;
+``""``: none). The variants of one resolution are stepped in turn (A, B, A, B, ...), so
+that a change in the machine's load hits them alike, and the steps are split into
+``--rounds`` rounds, each followed by one run of the baseline each way: the baseline
+figures are the medians of those runs (each run's in ``baseline_rounds`` and
+``baseline_passive_rounds``), so that a drift of the machine's speed over the minutes of
+a run (the same step took 28 to 40 ms at 64^3 within an hour here) hits windbench and
+the baseline alike. Each variant's fields leave the cache while the others step: run one
+variant for the figures of a single run (the same 64^3 step took 33-37 ms alone and
+52-62 ms as one of four variants). The load average (``uptime``) is printed and
+recorded, since the machine's 2 cores are shared. ``setup_seconds`` (backend
+construction, incl. loading or compiling the numba kernels) and ``first_step_seconds``
+are reported separately; run the script twice to see cached-compile figures (numba
+cache=True).
+
+Each variant first takes ``--settle`` untimed steps (column ``settle_steps``), so that
+the timed steps are those of a developed flow, as in a run after its spin-up, rather
+than the start from rest: the pressure solve's extrapolated guess
+(``wind.pressure_guess``) saves iterations once the pressure varies smoothly (at 64^3
+from about the 35th step; ``--settle 0`` times steps 3 to 12 from rest).
 
 ``--validation`` runs the validation problems (experiments/validation_ns/problems.py) at
 64 cells in both precisions instead: Taylor-Green at CFL 0.5 for every scheme and
@@ -58,6 +67,7 @@ from windbench.wind.base import Obstacles
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments" / "results" / "bench_ns.csv"
+SETTLE = 60  # untimed steps before the timed ones (--settle)
 BASELINES = ROOT.parent / "shared" / "baselines"
 VALIDATION_OUT = ROOT / "experiments" / "results" / "bench_ns_precision.csv"
 VALIDATION_CELLS = 64
@@ -164,6 +174,11 @@ def bench(resolution: int, args) -> list[dict]:
         Variant(resolution, p, a, args.turbulence, tuple(o.split()))
         for p, a, o in product(args.precisions, args.advection, args.set)
     ]
+    for _ in range(args.settle):  # untimed: the flow develops
+        for v in variants:
+            v.step()
+    for v in variants:
+        v.rows.clear()
     bases = {"": [], "_passive": []}
     per_round = -(-args.steps // args.rounds)
     for done in range(0, args.steps, per_round):
@@ -174,7 +189,7 @@ def bench(resolution: int, args) -> list[dict]:
             if args.baselines:
                 bases[suffix].append(baseline(resolution, args.baselines, as_shipped))
     load = os.getloadavg()[0]
-    rows = [{**v.row(), "load_average_1min": load} for v in variants]
+    rows = [{**v.row(), "settle_steps": args.settle, "load_average_1min": load} for v in variants]
     del variants
     for suffix, times in bases.items():
         base = float(np.median(times)) if times else np.nan
@@ -214,6 +229,7 @@ def main():
     ap.add_argument("--resolutions", type=int, nargs="+", default=[16, 32, 64, 128])
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--rounds", type=int, default=2, help="baseline runs between the steps")
+    ap.add_argument("--settle", type=int, default=SETTLE, help="untimed steps before the timed")
     ap.add_argument("--precisions", nargs="+", default=["float64", "float32"])
     ap.add_argument("--advection", nargs="+", default=["semi_lagrangian"])
     ap.add_argument("--turbulence", default=None, help="wind.turbulence (default: the config's)")

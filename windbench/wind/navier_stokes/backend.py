@@ -14,8 +14,8 @@ One step of ``dt``, each operator in its own module:
    limited ``maccormack``, each followed by implicit (backward Euler) viscosity — first
    order in time; or ``second_order``, the trapezoidal rule along the characteristics
    (:meth:`NavierStokesWind._advect_diffuse_second_order`), second order in space and time;
-5. projection to the relative residual ``wind.pressure_tol`` (:mod:`.projection`, solved
-   by multigrid-preconditioned CG, :mod:`.multigrid`).
+5. projection to the relative residual ``wind.pressure_tol`` (:mod:`.projection`; CG
+   with a multigrid preconditioner, :mod:`.multigrid`, from an extrapolation, :mod:`.guess`).
 
 MAC grid: component a on the faces normal to axis a, pressure at cell centres, so that
 divergence and gradient are adjoint (the projection is an orthogonal projection free of
@@ -75,6 +75,7 @@ from windbench.wind.navier_stokes.boundaries import (
     padded_shape,
 )
 from windbench.wind.navier_stokes.forcing import add_force, relax_to_primitives
+from windbench.wind.navier_stokes.guess import GUESSES, PressureGuess
 from windbench.wind.navier_stokes.multigrid import MultigridPoisson
 from windbench.wind.navier_stokes.projection import (
     cell_centred,
@@ -107,6 +108,7 @@ class NavierStokesConfig(WindConfig):
     viscosity: float = 1.5e-5  # kinematic, m^2/s (air)
     pressure_tol: float = 1e-6  # relative residual of the projection
     pressure_max_iterations: int = 200
+    pressure_guess: str = "extrapolate"  # extrapolate | previous: the solve's start (.guess)
     diffusion_tol: float = 1e-8  # bound on the implicit solve's max error / velocity scale
     source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
     coupling: str = "paper"  # none | paper | projection (paper §4.1.2)
@@ -125,6 +127,7 @@ def _check(params):
         ("advection", ADVECTION),
         ("coupling", COUPLING),
         ("precision", PRECISION),
+        ("pressure_guess", GUESSES),
         ("turbulence", TURBULENCE),
     )
     for key, allowed in choices:
@@ -257,6 +260,7 @@ class NavierStokesWind(WindField):
         self.weights = [np.zeros(w.shape) for w in self.poisson.fine.w]
         self._set_weights()
         self.psi = np.zeros(shape)
+        self.guess = PressureGuess(shape, str(params.pressure_guess))
         self.rhs = np.zeros(shape)
         self.smagorinsky_length2 = np.full(
             shape[2], (float(params.smagorinsky_constant) * self.h) ** 2
@@ -606,15 +610,20 @@ class NavierStokesWind(WindField):
                 np.copyto(self.q[a], iterate[a], casting="same_kind")
         return sweeps
 
-    def _project(self):
+    def _project(self, dt: float | None = None):
+        """The projection (:mod:`.projection`) of a step ``dt`` (None: of a state that is
+        no time step), its solve started from the last solutions extrapolated
+        (:mod:`.guess`). Returns (iterations, relative residual, ||rhs||_2)."""
         face_flux(*self.q, self.target, self.rhs)
         np.negative(self.rhs, out=self.rhs)  # A psi = -(h div u - target)
         if self._pockets[1]:  # air enclosed by cloth: its right-hand side must sum to 0
             coupling.balance_pockets(self.rhs, *self._pockets)
         atol = 1e-14 * self.scene.reference_speed * np.sqrt(self.grid.n_cells)
+        self.guess.start(self.psi, dt)
         iters, res = self.poisson.solve(
             self.psi, self.rhs, self.tol, self.max_iterations, atol=atol
         )
+        self.guess.solved_step(dt)
         rhs_norm = self.poisson.rhs_norm  # ||rhs||_2, computed by the solve
         for a in range(3):
             subtract_gradient(self.q[a], a, self.psi, self.free[a], self.periodic)
@@ -741,7 +750,7 @@ class NavierStokesWind(WindField):
             t2 = time.perf_counter()
             sweeps = self._diffuse(dt)
             t3 = time.perf_counter()
-        iters, res, rhs_norm = self._project()
+        iters, res, rhs_norm = self._project(dt)
         if self._blocked is not None:
             self._pressure_loads(dt, obstacles)
         t4 = time.perf_counter()
