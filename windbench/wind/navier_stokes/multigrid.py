@@ -851,6 +851,10 @@ class MultigridPoisson:
         prolong_add.on(lev.cells)(nxt.x, lev.ratio, lev.x)
         return lev.smooth(lev.x, lev.b, PRE_SWEEPS, reverse=True, r=r)
 
+    def residual_norm(self, x, b) -> float:
+        """||b - A x||_2 on the finest level (scratch: the solve's residual vector)."""
+        return float(np.sqrt(residual(x, b, self.fine.args(), self.r)))
+
     def solve(self, x, b, tol: float, max_iterations: int, atol: float = 0.0):
         """Solve A x = b in place from the guess in x; return (iterations, relative residual).
         ``rhs_norm`` is then ||b||_2 (of b with its mean removed when A is singular)."""
