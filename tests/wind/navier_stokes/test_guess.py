@@ -92,7 +92,7 @@ def test_the_solve_from_the_guess_of_a_quadratic_series_needs_no_iteration():
     guess, psi, iterations = PressureGuess(SHAPE), np.zeros(SHAPE), []
     for exact in series:
         b = operator_numpy(exact, w, (False,) * 3)
-        guess.start(psi, DT, lambda x, b=b: solver.residual_norm(x, b))
+        guess.start(psi, DT, lambda x, b=b: solver.smooth_residual_norm(x, b))
         iterations.append(solver.solve(psi, b, 1e-6, 50)[0])
         guess.solved_step(DT)
     assert min(iterations[:3]) > 0 and iterations[3:] == [0, 0, 0]

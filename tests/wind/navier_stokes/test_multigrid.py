@@ -48,6 +48,22 @@ def test_operator_and_residual_match_the_stencil_written_out(periodic):
     np.testing.assert_allclose(out, b - expected, rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.parametrize("m", [1, 4])
+def test_block_residual_sums_the_residual_over_blocks(m):
+    """The squared block sums of b - A x (numpy), blocks of m^3 cells; the 10-plane axis
+    ends in a block of 2 planes, the 8 rows in two whole blocks."""
+    rng = np.random.default_rng(4)
+    lev = _level(rng, (False, False, False))
+    x, b = rng.random(SHAPE), rng.random(SHAPE)
+    r = b - _operator_numpy(x, lev.w, (False,) * 3)
+    padded = np.zeros([-(-n // m) * m for n in SHAPE])
+    padded[: SHAPE[0], : SHAPE[1], : SHAPE[2]] = r
+    p0, p1, p2 = (n // m for n in padded.shape)
+    sums = padded.reshape(p0, m, p1, m, p2, m).sum(axis=(1, 3, 5))
+    got = pressure.block_residual(x, b, lev.args(), m)
+    np.testing.assert_allclose(got, (sums * sums).sum(), rtol=1e-6)
+
+
 @pytest.mark.parametrize("periodic", [(False, False, False), (True, False, True)])
 def test_row_classes_follow_the_face_weights(periodic):
     """ALL_OPEN: an interior row whose inner cells have every face open; ROW_CONSTANT: each

@@ -619,7 +619,7 @@ class NavierStokesWind(WindField):
         if self._pockets[1]:  # air enclosed by cloth: its right-hand side must sum to 0
             coupling.balance_pockets(self.rhs, *self._pockets)
         atol = 1e-14 * self.scene.reference_speed * np.sqrt(self.grid.n_cells)
-        self.guess.start(self.psi, dt, lambda x: self.poisson.residual_norm(x, self.rhs))
+        self.guess.start(self.psi, dt, lambda x: self.poisson.smooth_residual_norm(x, self.rhs))
         iters, res = self.poisson.solve(
             self.psi, self.rhs, self.tol, self.max_iterations, atol=atol
         )

@@ -12,12 +12,16 @@ them (backward differences)
 
 leaves an error of third order in dt where psi is smooth in time (linear, 2 psi^(n-1) -
 psi^(n-2), with two). It amplifies what is not smooth: a part of psi that flips from
-step to step (a flapping cloth's imprint, inflow turbulence) comes back up to seven
-times as large. So the solve starts from whichever of the two, extrapolation or warm
-start, leaves the smaller residual ||b - A psi||_2 (two residuals a step, a fifth of an
-iteration each). The solve still stops at the same relative residual, so only the
-iteration count changes (``experiments/bench_ns.py`` times both,
-``wind.pressure_guess``: ``extrapolate``, or ``previous`` for the warm start alone).
+step to step (a flapping cloth's imprint, a wake's eddies) comes back up to seven times
+as large. So the solve starts from whichever of the two, extrapolation or warm start,
+leaves the smaller residual summed over blocks of 4^3 cells
+(:meth:`~.multigrid.MultigridPoisson.smooth_residual_norm`, two residual passes a step):
+the smooth error, which costs the iterations, where the residual of each cell would
+favour the guess with the smaller error from cell to cell, which the multigrid cycle
+removes at once (``multigrid.GUESS_BLOCK`` has the figures). The solve still stops at
+the same relative residual, so only the iteration count changes
+(``experiments/bench_ns.py`` times both, ``wind.pressure_guess``: ``extrapolate``, or
+``previous`` for the warm start alone).
 psi holds dt p / (rho h): a solve after a change of the time step, or after a
 projection that is no time step (an initial condition), starts again from the warm
 start.
@@ -80,8 +84,9 @@ class PressureGuess:
         self, psi: np.ndarray, dt: float | None, residual_norm: Callable[[np.ndarray], float]
     ) -> None:
         """Turn ``psi`` (the last solution) into the guess for the solve of a step ``dt``
-        (None: a projection that is no time step, started from psi as it is):
-        the extrapolation if its ``residual_norm`` is the smaller."""
+        (None: a projection that is no time step, started from psi as it is): the
+        extrapolation if its ``residual_norm`` (a guess's distance from the solution) is
+        the smaller."""
         if dt is None or dt != self.dt:  # psi is dt p / (rho h): no series to extend
             self.solved, self.dt = 0, dt
         held = min(self.solved, self.order)
