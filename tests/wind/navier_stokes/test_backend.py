@@ -339,3 +339,25 @@ def test_a_moving_body_is_a_moving_boundary_of_a_closed_box(motion):
     bound = wind.tol * stats["pressure_rhs_norm"] / wind.scene.reference_speed
     assert stats["mac_divergence_max"] <= bound * (1 + 1e-6) + 1e-13
     assert np.abs(wind.velocity()[~solid]).max() > 0.1  # the body pushes the air
+
+
+@pytest.mark.parametrize("case", ["lid_cavity", "inflow_outflow_body"])
+def test_the_extrapolated_pressure_guess_saves_iterations_to_the_same_answer(case):
+    """A flow developing smoothly from rest: the pressure changes smoothly in time, so
+    its extrapolation (wind.pressure_guess, error O(dt^3) against the last pressure's
+    O(dt)) starts the solves nearer and they take fewer iterations in all, to the same
+    tolerance: the velocities agree within what the tolerance lets them differ."""
+    boundary, sources, bodies, lid = CASES[case]
+    runs = {}
+    for guess in ("extrapolate", "previous"):
+        wind = make(box_scene(boundary, sources, bodies, lid), 16, pressure_guess=guess)
+        obstacles = Obstacles.rigid_only(wind.scene.bodies)
+        iterations = 0
+        for _ in range(30):
+            wind.step(0.02, obstacles)
+            iterations += wind.stats()["pressure_iterations"]
+        runs[guess] = iterations, wind.velocity()
+    assert runs["extrapolate"][0] < runs["previous"][0]
+    # measured: 45 against 92 and 107 against 152 iterations, velocities 7e-12 and 9e-8
+    # m/s apart (a relative residual of 1e-6 in a 2 m/s flow)
+    np.testing.assert_allclose(runs["extrapolate"][1], runs["previous"][1], atol=1e-6)
