@@ -276,10 +276,7 @@ class NavierStokesWind(WindField):
         self.solid_faces = [self._faces_touching_solid(a) for a in range(3)]
         self.solid_values = [0.0, 0.0, 0.0]  # still bodies; moving ones: _move_bodies
         dirichlet = any(k in (OUTFLOW, OPENING) for k in self.kinds)
-        self.poisson = MultigridPoisson(
-            shape, self.periodic, singular=not dirichlet, dtype=self.dtype
-        )
-        _warn_unhalved_axes(shape, self.poisson.levels[-1].shape)
+        self.poisson = self._pressure_solver(shape, singular=not dirichlet)
         self.weights = [np.zeros(w.shape) for w in self.poisson.fine.w]
         self._set_weights()
         self.psi = np.zeros(shape)
@@ -300,6 +297,13 @@ class NavierStokesWind(WindField):
         self._initial_condition(scene)
 
     # ------------------------------------------------------------ set-up helpers
+
+    def _pressure_solver(self, shape, singular: bool) -> MultigridPoisson:
+        """The projection's solver (:mod:`.multigrid`), with a warning where its levels
+        stop short (:func:`_warn_unhalved_axes`)."""
+        poisson = MultigridPoisson(shape, self.periodic, singular=singular, dtype=self.dtype)
+        _warn_unhalved_axes(shape, poisson.levels[-1].shape)
+        return poisson
 
     def _rough_ground(self, scene, shape) -> tuple[float, np.ndarray | None]:
         """(C_D of the rough ground, the wall law's scratch plane of the x faces)
