@@ -6,7 +6,8 @@ the same run.
 
     PYTHONPATH=. python experiments/bench_ns.py [--resolutions 64 128] [--steps 10]
         [--settle 60] [--rounds 2] [--precisions float64 float32]
-        [--advection semi_lagrangian second_order] [--no-baseline] [--set "KEY=VALUE ..." ...] [--out CSV]
+        [--advection semi_lagrangian second_order] [--no-baseline]
+        [--set "KEY=VALUE ..." ...] [--out CSV]
     PYTHONPATH=. python experiments/bench_ns.py --validation
 
 
