@@ -175,6 +175,8 @@ def test_bad_parameters_raise_config_error():
         make(spec, 8, coupling="two_way")
     with pytest.raises(ConfigError, match="wind.viscosity"):
         make(spec, 8, viscosity=-1.0)
+    with pytest.raises(ConfigError, match=r"wind.pressure_guess.*'extrapolate', 'previous'"):
+        make(spec, 8, pressure_guess="zero")
 
 
 def test_fence_lee_through_the_run_loop(tmp_path):
