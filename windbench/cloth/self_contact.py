@@ -491,8 +491,14 @@ def leaf_pairs(tree, fit, cos_flat, gap, bridge):
     vertex and fit in one such cone together, or, with ``bridge``, two leaves that a third
     joins into one (:func:`_bridged`: the contacts; not the search for crossings, where a
     crumple tighter than the thickness crosses itself within such a cone)."""
-    bounds = (fit.box, fit.dop, fit.cone, fit.live)
+    bounds = _search_bounds(fit)
     return descend(tree, bounds, cos_flat, gap, bridge, _ROOT, _ROOT, _LEAVES, fit.stack)
+
+
+@njit(cache=True)
+def _search_bounds(fit):
+    """The patches' (box, dop, cone, live) that :func:`descend` searches by."""
+    return fit.box, fit.dop, fit.cone, fit.live
 
 
 @njit(cache=True)
@@ -561,7 +567,7 @@ def contact_pairs(sc, p, fit, reach):
     if sc.threads < 2:
         pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, _BRIDGE)
         return close_pairs(sc, p, fit.box, pairs, found, reach)
-    bounds, limit = (fit.box, fit.dop, fit.cone, fit.live), _task_limit(sc)
+    bounds, limit = _search_bounds(fit), _task_limit(sc)
     tasks, n = descend(
         sc.tree, bounds, _COS_CONTACT, reach, _BRIDGE, _ROOT, _ROOT, limit, fit.stack
     )
@@ -1120,7 +1126,7 @@ def _threaded_crossing_count(sc, p, fit):
     limit) that the threads count at once (:func:`_task_search`): the same sum. A
     separate entry point, so that a run that never takes it never compiles it."""
     refit(sc.tree, sc.triangles, p, fit)
-    bounds, limit = (fit.box, fit.dop, fit.cone, fit.live), _task_limit(sc)
+    bounds, limit = _search_bounds(fit), _task_limit(sc)
     tasks, n = descend(
         sc.tree, bounds, _NEVER_FLAT, 0.0, _NO_BRIDGE, _ROOT, _ROOT, limit, fit.stack
     )

@@ -111,7 +111,7 @@ class NavierStokesConfig(WindConfig):
     viscosity: float = 1.5e-5  # kinematic, m^2/s (air)
     pressure_tol: float = 1e-6  # relative residual of the projection
     pressure_max_iterations: int = 200
-    pressure_guess: str = "extrapolate"  # extrapolate | previous: the solve's start (.guess)
+    pressure_guess: str = GUESSES[0]  # extrapolate | previous: the solve's start (.guess)
     diffusion_tol: float = 1e-8  # bound on the implicit solve's max error / velocity scale
     source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
     coupling: str = "paper"  # none | paper | projection (paper §4.1.2)
