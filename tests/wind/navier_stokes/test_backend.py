@@ -363,18 +363,3 @@ def test_the_extrapolated_pressure_guess_saves_iterations_to_the_same_answer(cas
     # measured: 45 against 92 and 107 against 152 iterations, velocities 7e-12 and 9e-8
     # m/s apart (a relative residual of 1e-6 in a 2 m/s flow)
     np.testing.assert_allclose(runs["extrapolate"][1], runs["previous"][1], atol=1e-6)
-
-
-@pytest.mark.parametrize("resolution, coarsest", [(16, None), (36, "9x9x9")])
-def test_a_pressure_grid_the_multigrid_cannot_halve_far_is_warned_of(caplog, resolution, coarsest):
-    """4 x 2 x 2 m: 16 x 8 x 8 cells halve down to 2 x 2 x 2; 36 x 18 x 18 only down to
-    9 x 9 x 9 (9 is odd), longer than COARSEST_AXIS."""
-    boundary, sources, bodies, lid = CASES["lid_cavity"]
-    with caplog.at_level("WARNING", logger="windbench"):
-        wind = make(box_scene(boundary, sources, bodies, lid), resolution)
-    warned = [r.getMessage() for r in caplog.records if "pressure multigrid" in r.getMessage()]
-    assert wind.grid.shape == (resolution, resolution // 2, resolution // 2)
-    if coarsest is None:
-        assert not warned
-    else:
-        assert len(warned) == 1 and f"only down to {coarsest} cells" in warned[0]

@@ -202,3 +202,108 @@ def test_mgpcg_with_a_single_precision_v_cycle_reaches_double_precision_accuracy
     assert residual <= 1e-10 and iterations <= 14  # 11 measured
     x -= x.mean()
     assert np.linalg.norm(x - psi) <= 1e-8 * np.linalg.norm(psi)  # 1.7e-10 measured
+
+
+ODD = (9, 5, 11)  # every axis odd: halved to 5 x 3 x 6, each last cell over one fine cell
+
+
+def _padded(a, shape):
+    """``a`` zero-padded at the far ends to ``shape``."""
+    return np.pad(a, [(0, n - m) for n, m in zip(shape, a.shape, strict=True)])
+
+
+def test_transfers_on_odd_axes_sum_the_children_present_and_inject_back():
+    """Restriction = the residual summed over the fine cells present under each coarse
+    cell / 8 (the missing children of a cut block count 0), prolongation = injection into
+    the fine cells present: restriction is P^T / 8 on any shape."""
+    rng = np.random.default_rng(7)
+    lev = _level(rng, shape=ODD)
+    ratio = np.full(3, 2, dtype=np.int64)
+    coarse_shape = tuple(-(-n // 2) for n in ODD)
+    x = rng.standard_normal(ODD).astype(lev.x.dtype)
+    b = rng.standard_normal(ODD).astype(lev.x.dtype)
+    coarse = np.full(coarse_shape, 5.0, dtype=lev.x.dtype)
+    pressure.residual_restrict(x, b, lev.args(), ratio, coarse)
+    r = b - _operator_numpy(x.astype(np.float64), lev.w, (False,) * 3)
+    blocks = _padded(r, tuple(2 * n for n in coarse_shape))
+    expected = blocks.reshape(5, 2, 3, 2, 6, 2).sum(axis=(1, 3, 5)) / 8
+    np.testing.assert_allclose(coarse, expected, rtol=1e-5, atol=1e-5)
+    c = rng.standard_normal(coarse_shape).astype(lev.x.dtype)
+    fine = np.zeros(ODD, dtype=lev.x.dtype)
+    pressure.prolong_add(c, ratio, fine)
+    injected = c.repeat(2, 0).repeat(2, 1).repeat(2, 2)[: ODD[0], : ODD[1], : ODD[2]]
+    np.testing.assert_array_equal(fine, injected)
+
+
+def test_coarse_face_weights_on_odd_axes_close_the_faces_beyond_the_grid():
+    """A coarse face's weight is the mean over the 4 fine faces a full block gives it,
+    faces beyond the grid counted as closed; the far boundary face of an odd axis is the
+    fine boundary face."""
+    rng = np.random.default_rng(8)
+    ratio = np.full(3, 2, dtype=np.int64)
+    coarse_shape = tuple(-(-n // 2) for n in ODD)
+    for a in range(3):
+        fine = rng.uniform(0.5, 1.0, tuple(n + (a == b) for b, n in enumerate(ODD)))
+        out = np.zeros(tuple(n + (a == b) for b, n in enumerate(coarse_shape)))
+        pressure.coarsen_weights(fine, a, ratio, out)
+        faces = np.take(fine, np.minimum(2 * np.arange(coarse_shape[a] + 1), ODD[a]), axis=a)
+        across = [2 * n if b != a else n for b, n in enumerate(out.shape)]
+        full = _padded(faces, tuple(across))
+        expected = (
+            full.reshape(
+                [m for b, n in enumerate(out.shape) for m in ((n, 2) if b != a else (n, 1))]
+            ).sum(axis=(1, 3, 5))
+            / 4
+        )
+        np.testing.assert_allclose(out, expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("periodic", [(False, False, False), (False, True, False)])
+def test_odd_axes_are_halved_and_the_preconditioner_stays_symmetric(periodic):
+    """The two_flags_wall grid of experiment=paper at 80 cells, 80 x 13 x 20, doubled
+    along y (26 -> 13) so that an odd axis appears on a level of the row kernels: every
+    level halves every axis of >= 4 cells (down to at most 3 cells), a periodic one only
+    into an even count, and the cycle is symmetric positive definite (r1 . M r2 == r2 .
+    M r1, float32 precision; a periodic axis of 13 cells on the coarse levels broke this,
+    0.26 % apart: red-black colours meet across its seam)."""
+    shape = (80, 26, 20)
+    rng = np.random.default_rng(9)
+    solver = pressure.MultigridPoisson(shape, np.array(periodic), singular=False)
+    shapes = [lev.shape for lev in solver.levels]
+    y = (26, 26) if periodic[1] else (13, 7)
+    assert shapes[:3] == [(80, 26, 20), (40, y[0], 10), (20, y[1], 5)]
+    assert max(shapes[-1][0], shapes[-1][2]) <= 3 and shapes[-1][1] in (26, 2)
+    assert solver.first_small == 1  # the odd axis goes through the row kernels' transfers
+    w = [np.ones(tuple(n + (a == b) for b, n in enumerate(shape))) for a in range(3)]
+    w[0][30:40, 5:15, 6:12] = 0.0  # a body
+    w[0][-1] = 1.0  # an outflow at the far x end (ghost psi = 0): A is definite
+    solver.set_weights(*w)
+    r1, r2 = rng.standard_normal(shape), rng.standard_normal(shape)
+    z1, z2 = np.empty(shape), np.empty(shape)
+    solver.vcycle(r1, z1)
+    solver.vcycle(r2, z2)
+    assert float(np.sum(r2 * z1)) == pytest.approx(float(np.sum(r1 * z2)), rel=1e-5)
+    assert float(np.sum(r1 * z1)) > 0
+
+
+def test_mgpcg_on_a_grid_of_odd_axes_converges_like_an_even_one():
+    """A manufactured problem b = A psi on the paper's two_flags_wall grid at 80 cells
+    (80 x 13 x 20, an outflow at the far x end) and on the even 80 x 16 x 20: the odd grid
+    needs no more than two iterations more, and both recover psi."""
+    iterations = {}
+    for shape in ((80, 13, 20), (80, 16, 20)):
+        rng = np.random.default_rng(10)
+        w = [np.ones(tuple(n + (a == b) for b, n in enumerate(shape))) for a in range(3)]
+        for a in range(3):
+            np.moveaxis(w[a], a, 0)[[0, -1]] = 0.0
+        w[0][-1] = 1.0  # outflow
+        w[0][30:34, 2:9, 6:14] = 0.0  # a wall across the flow
+        solver = pressure.MultigridPoisson(shape, np.zeros(3, bool), singular=False)
+        solver.set_weights(*w)
+        psi = rng.standard_normal(shape)
+        b = _operator_numpy(psi, w, (False,) * 3)
+        x = np.zeros(shape)
+        iterations[shape[1]], residual = solver.solve(x, b, 1e-10, 100)
+        assert residual <= 1e-10
+        assert np.linalg.norm(x - psi) <= 1e-7 * np.linalg.norm(psi)
+    assert iterations[13] <= iterations[16] + 2, iterations

@@ -98,7 +98,6 @@ TOLERANCE_FLOOR = {"float64": 0.0, "float32": 1e-6}
 COUPLING = ("none", "paper", "projection")
 TURBULENCE = ("none", "smagorinsky", "mixing_length")
 log = logging.getLogger("windbench")
-COARSEST_AXIS = 8  # cells: a coarsest pressure level longer than this is warned of
 DIFFUSION_MAX_SWEEPS = 500
 
 
@@ -164,25 +163,6 @@ def _check(params):
     force = list(params.get("body_force"))
     if len(force) != 3 or not np.all(np.isfinite(np.asarray(force, dtype=float))):
         raise ConfigError("wind.body_force", f"must be 3 finite numbers (m/s^2), got {force}")
-
-
-def _warn_unhalved_axes(fine, coarsest) -> None:
-    """A warning where the pressure multigrid stops at a coarsest level of more than
-    COARSEST_AXIS cells along an axis: it halves only axes of an even number of cells
-    (:mod:`.multigrid`), so an odd one stays as fine on every level and each solve takes
-    more iterations (two_flags_wall in experiment=paper: 8.8 MGPCG iterations and 12.2 ms
-    of projection per step at 80 cells, 80 x 13 x 20 down to 5 x 13 x 5, against 4.2 and
-    5.1 ms at 96 cells, 96 x 16 x 24 down to 3 x 2 x 3:
-    experiments/results/pressure_grid_shape.csv)."""
-    if max(coarsest) > COARSEST_AXIS:
-        log.warning(
-            "navier_stokes: the pressure multigrid halves the %s grid only down to %s cells "
-            "(it halves axes of an even number of cells), so each pressure solve takes more "
-            "iterations; a grid.resolution whose cell counts have more factors of 2 solves "
-            "faster",
-            "x".join(map(str, fine)),
-            "x".join(map(str, coarsest)),
-        )
 
 
 @register_backend("navier_stokes", config=NavierStokesConfig)
@@ -276,7 +256,9 @@ class NavierStokesWind(WindField):
         self.solid_faces = [self._faces_touching_solid(a) for a in range(3)]
         self.solid_values = [0.0, 0.0, 0.0]  # still bodies; moving ones: _move_bodies
         dirichlet = any(k in (OUTFLOW, OPENING) for k in self.kinds)
-        self.poisson = self._pressure_solver(shape, singular=not dirichlet)
+        self.poisson = MultigridPoisson(
+            shape, self.periodic, singular=not dirichlet, dtype=self.dtype
+        )
         self.weights = [np.zeros(w.shape) for w in self.poisson.fine.w]
         self._set_weights()
         self.psi = np.zeros(shape)
@@ -297,13 +279,6 @@ class NavierStokesWind(WindField):
         self._initial_condition(scene)
 
     # ------------------------------------------------------------ set-up helpers
-
-    def _pressure_solver(self, shape, singular: bool) -> MultigridPoisson:
-        """The projection's solver (:mod:`.multigrid`), with a warning where its levels
-        stop short (:func:`_warn_unhalved_axes`)."""
-        poisson = MultigridPoisson(shape, self.periodic, singular=singular, dtype=self.dtype)
-        _warn_unhalved_axes(shape, poisson.levels[-1].shape)
-        return poisson
 
     def _rough_ground(self, scene, shape) -> tuple[float, np.ndarray | None]:
         """(C_D of the rough ground, the wall law's scratch plane of the x faces)

@@ -14,7 +14,8 @@ level from a schedule written once (:func:`schedule`).
 The arithmetic is that of :mod:`.multigrid` (McAdams et al. 2010 as used there): red-black
 Gauss-Seidel x_c <- x_c + OMEGA ((b_c + sum_f w_f x_nb) / diag_c - x_c) on cells with an
 open face (cells without one are left alone), the residual b - A x restricted to the parent
-cell as the mean of its children, the coarse correction prolonged by injection; the
+cell as the sum over its children / a full block's count, the coarse correction prolonged
+by injection; the
 coarsest level gets many symmetric sweeps. Sums are taken in another order than there, so
 the preconditioner changes in the last bits of float32 (tested against the operator
 written out with numpy).
@@ -74,8 +75,9 @@ def _smooth(x, b, nb, w, inv, order, ranges, level, sweeps, reverse, omega):
 
 @njit(cache=True)
 def residual_restrict(x, b, nb, w, diag, parent, first, count, coarse_first, coarse_count, mean):
-    """b of the next level = mean over the children of the residual b - A x of the cells
-    first .. first + count - 1; also zeroes the next level's x (its cycle starts from 0)."""
+    """b of the next level = the residual b - A x of the cells first .. first + count - 1
+    summed over each parent's children, times ``mean`` (1 / a full block's count); also
+    zeroes the next level's x (its cycle starts from 0)."""
     for c in range(coarse_first, coarse_first + coarse_count):
         b[c] = 0.0
         x[c] = 0.0

@@ -12,31 +12,31 @@ opening faces have w = 1 and a ghost psi = 0. Zero divergence in every air cell 
 a symmetric positive (semi-)definite system; changing which faces are open only rewrites
 the weights (:meth:`MultigridPoisson.set_weights`).
 
-Multigrid: cell-centred, axes with an even number (>= 4) of cells halved per level; the
-coarse face weight is the mean of the fine ones it covers, the operator re-discretised
-with the coarse spacing (coefficient (h/H)^2 per axis); restriction is the mean of the
-children, prolongation injection (its transpose up to a factor 8); red-black successive
-over-relaxation x_c += omega ((b_c + sum_f w_f x_nb) / diag - x_c), omega = ``OMEGA`` on
-the coarse levels and ``FINE_OMEGA`` = 1 on the finest, the same sweeps in reverse order on
-the way up, so that the cycle is the symmetric positive definite preconditioner CG needs.
-The first coarse levels correct twice (a W, ``W_LEVELS``), the others once (a V); the
-cycle runs in single precision (``PRECONDITIONER_DTYPE``), CG in double. The levels below
-``SERIAL_CELLS`` cells run as one compiled call on flat tables (:mod:`.coarse_levels`);
-those below ``threads.PARALLEL_CELLS`` use the kernels' serial versions (:mod:`.threads`),
-the others smooth slab by slab in a wavefront (:func:`smooth_by_slabs`: the same numbers
-in two parallel loops instead of one per half sweep).
+Multigrid: cell-centred, every axis of >= 4 cells halved per level (an odd one to (n + 1)/2
+cells, the last over one fine cell, faces beyond it closed; a periodic one only into an
+even count: red and black must alternate across its seam); coarse face weight = mean of
+the fine ones covered, the operator re-discretised with coefficient (h/H)^2 per axis;
+restriction = sum over the children / a full block's count, prolongation P injection
+(restriction = P^T times a constant); red-black successive over-relaxation x_c += omega
+((b_c + sum_f w_f x_nb) / diag - x_c), omega = ``OMEGA`` on the coarse levels,
+``FINE_OMEGA`` = 1 on the finest, the same sweeps reversed on the way up: the symmetric
+positive definite preconditioner CG needs. The first coarse levels correct twice (a W,
+``W_LEVELS``), the others once (a V); the cycle runs in single precision
+(``PRECONDITIONER_DTYPE``), CG in double. Levels below ``SERIAL_CELLS`` cells run as one
+compiled call on flat tables (:mod:`.coarse_levels`); those below
+``threads.PARALLEL_CELLS`` the kernels' serial versions (:mod:`.threads`), the others
+smooth slab by slab in a wavefront (:func:`smooth_by_slabs`: the same numbers in two
+parallel loops instead of one per half sweep).
 
-The kernels work row by row along z, with each row classified once per weight change
+The kernels work row by row along z, each row classified once per weight change
 (:func:`classify_rows`): ALL_OPEN rows use the constant 7-point stencil, ROW_CONSTANT rows
-per-row coefficients, GENERAL rows the face weights cell by cell. Every reduction sums by
-planes, then over the planes in order (:func:`ordered_sum`), so the numbers do not
-depend on the thread count. Without any pressure boundary the constant is removed from
-the right-hand side and each preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2,
-warm-started from the previous step's psi.
+per-row coefficients, GENERAL rows the face weights cell by cell. Reductions sum by planes,
+then the planes in order (:func:`ordered_sum`): the same numbers on any thread count. Without any pressure boundary the constant is removed from
+the right-hand side and each preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2
+from the guess the caller gives (:mod:`.guess`).
 
-The small per-cell and per-row helpers are plain compiled functions, which LLVM inlines
-into the loops. Numba's own inlining (``inline="always"``) typed a copy of each at every
-call site: the same numbers at the same speed for about twice this module's compile time
+The per-cell and per-row helpers are plain compiled functions that LLVM inlines; numba's
+``inline="always"`` gave the same numbers and speed for twice the compile time
 (``experiments/compile_times.py``).
 """
 
@@ -543,10 +543,13 @@ def _block_plane(x, b, level, m, I):
 
 @threaded()
 def residual_restrict(x, b, level, ratio, coarse):
-    """coarse[I,J,K] = mean of the residual b - A x over the fine cells it covers (ratio 1
-    or 2 per axis). The residual of the fine planes under one coarse plane goes to a
-    scratch block and straight into the mean: it is never stored as a whole field (a
-    write and a read of a fine field less per cycle)."""
+    """coarse[I,J,K] = sum of the residual b - A x over the fine cells it covers, divided
+    by the ratios' product (ratio 1 or 2 per axis): the mean of the children, and on an
+    odd axis halved the last coarse cell's one child over 2, so that restriction stays
+    one constant times the transpose of the prolongation (the cycle symmetric). The
+    residual of the fine planes under one coarse plane goes to a scratch block and
+    straight into the sum: it is never stored as a whole field (a write and a read of a
+    fine field less per cycle)."""
     for I in prange(coarse.shape[0]):
         _restrict_plane(x, b, level, ratio, coarse, np.int64(I))
 
@@ -559,26 +562,30 @@ def _restrict_plane(x, b, level, ratio, coarse, I):
     n1, n2 = coarse.shape[1], coarse.shape[2]
     r0, r1, r2 = ratio[0], ratio[1], ratio[2]
     inv = 1.0 / (r0 * r1 * r2)
+    planes = min(r0, x.shape[0] - r0 * I)  # fine planes under plane I: 1 at an odd end
     fine = np.empty((r0, x.shape[1], x.shape[2]), x.dtype)
-    for a in range(r0):
+    for a in range(planes):
         _operator_plane(x, b, level, r0 * I + a, fine[a], RESIDUAL)
+    full = x.shape[2] // r2  # coarse cells along z with r2 children
     for J in range(n1):
         coarse[I, J, :] = 0.0
-        for a in range(r0):
-            for bb in range(r1):
-                j = r1 * J + bb
-                for K in range(n2):
+        for a in range(planes):
+            for j in range(r1 * J, min(r1 * J + r1, x.shape[1])):
+                for K in range(full):
                     acc = fine[a, j, r2 * K]
                     if r2 == 2:
                         acc += fine[a, j, r2 * K + 1]
                     coarse[I, J, K] += acc
+                if full < n2:  # an odd axis halved: the last cell's one child
+                    coarse[I, J, full] += fine[a, j, x.shape[2] - 1]
         for K in range(n2):
             coarse[I, J, K] *= inv
 
 
 @threaded()
 def prolong_add(coarse, ratio, fine):
-    """fine += coarse value of the parent cell (injection; ratio 1 or 2 per axis)."""
+    """fine += coarse value of the parent cell (injection; ratio 1 or 2 per axis, the last
+    coarse cell of an odd axis halved the parent of one fine cell)."""
     n0, n1, n2 = fine.shape
     r0, r1, r2 = ratio[0], ratio[1], ratio[2]
     for i in prange(n0):
@@ -589,6 +596,8 @@ def prolong_add(coarse, ratio, fine):
                     c = coarse[I, J, K]
                     fine[i, j, 2 * K] += c
                     fine[i, j, 2 * K + 1] += c
+                if n2 % 2:
+                    fine[i, j, n2 - 1] += coarse[I, J, n2 // 2]
             else:
                 for k in range(n2):
                     fine[i, j, k] += coarse[I, J, k]
@@ -596,9 +605,13 @@ def prolong_add(coarse, ratio, fine):
 
 @njit(cache=True)
 def coarsen_weights(fine, a, ratio, coarse):
-    """Coarse face weight = mean of the fine face weights it covers (faces normal to a)."""
+    """Coarse face weight = sum of the fine face weights it covers over their full count
+    (faces normal to a): their mean, where faces beyond the far end of an odd axis halved
+    count as closed. Coarse face I normal to a lies on fine face ratio_a I, the far
+    boundary of an odd axis halved on the fine boundary face (one fine cell nearer)."""
     n0, n1, n2 = coarse.shape
     ra, rb, rc = ratio[0], ratio[1], ratio[2]
+    f0, f1, f2 = fine.shape
     cnt = 1
     for ax in range(3):
         if ax != a:
@@ -609,9 +622,15 @@ def coarsen_weights(fine, a, ratio, coarse):
             for K in range(n2):
                 acc = 0.0
                 i0, j0, k0 = I * ra, J * rb, K * rc
-                for x in range(1 if a == 0 else ra):
-                    for y in range(1 if a == 1 else rb):
-                        for z in range(1 if a == 2 else rc):
+                if a == 0:
+                    i0 = min(i0, f0 - 1)
+                elif a == 1:
+                    j0 = min(j0, f1 - 1)
+                else:
+                    k0 = min(k0, f2 - 1)
+                for x in range(min(1 if a == 0 else ra, f0 - i0)):
+                    for y in range(min(1 if a == 1 else rb, f1 - j0)):
+                        for z in range(min(1 if a == 2 else rc, f2 - k0)):
                             acc += fine[i0 + x, j0 + y, k0 + z]
                 coarse[I, J, K] = acc * inv
 
@@ -783,13 +802,17 @@ class MultigridPoisson:
         while True:
             cur = levels[-1]
             ratio = np.array(
-                [2 if (n % 2 == 0 and n >= min_coarse) else 1 for n in cur.shape], dtype=np.int64
+                [
+                    2 if n >= min_coarse and (n % 4 == 0 or not p) else 1
+                    for n, p in zip(cur.shape, self.periodic, strict=True)
+                ],
+                dtype=np.int64,
             )
             if ratio.max() == 1:
                 break
             cur.ratio = ratio
             coef = cur.coef[:3].astype(np.float64) / ratio.astype(float) ** 2
-            coarse = [n // r for n, r in zip(cur.shape, ratio, strict=True)]
+            coarse = [-(-n // r) for n, r in zip(cur.shape, ratio, strict=True)]
             levels.append(_Level(coarse, coef, self.periodic, PRECONDITIONER_DTYPE))
         self.levels = levels
         self.coarse_sweeps = 2 * max(levels[-1].shape) + 4

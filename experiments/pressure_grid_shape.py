@@ -1,0 +1,112 @@
+"""The projection's cost against the grid's shape: MGPCG iterations per step and the
+median projection time of one windbench run per case, each run in its own process.
+
+    PYTHONPATH=. python experiments/pressure_grid_shape.py [--cases paper:80 ...]
+        [--trees . /path/to/other/checkout] [--out CSV]
+
+A case is ``experiment:resolution[:scene]`` (scene two_flags_wall unless given) with
+``wind=navier_stokes``. Each ``--trees`` entry is a checkout of windbench put first on
+PYTHONPATH and the working directory of its runs (the first one: this one), so that two versions of the solver are
+compared case by case, runs alternated in one invocation; the dataset's own
+``git_commit`` names the code each row ran. The statistics are taken over the recorded
+window only (after the run's spin-up, ``sim.spinup``): a developed flow.
+
+Appends to experiments/results/pressure_grid_shape.csv (per run: the grid's shape, the
+multigrid's coarsest level, the recorded steps, the mean and max MGPCG iterations, the
+median projection and step times, the run's wall seconds and the load average).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import xarray as xr
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from experiments.rows import show_and_append  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "experiments/results/pressure_grid_shape.csv"
+CASES = ("paper:72", "paper:80", "paper:96", "paper:40:shirt")
+FIELDS = (
+    "date", "commit", "experiment", "scene", "resolution", "shape", "coarsest_level",
+    "steps", "pressure_iterations_mean", "pressure_iterations_max", "project_ms_median",
+    "step_ms_median", "run_seconds", "load_average_1min", "command",
+)  # fmt: skip
+SHOWN = ("commit", "scene", "resolution", "shape", "coarsest_level", "pressure_iterations_mean")
+
+
+def coarsest_level(tree: Path, shape: tuple[int, ...]) -> str:
+    """The coarsest multigrid level of a grid in the solver of checkout ``tree``."""
+    code = (
+        "import numpy as np\n"
+        "from windbench.wind.navier_stokes.multigrid import MultigridPoisson\n"
+        f"s = MultigridPoisson({tuple(shape)}, np.zeros(3, bool), singular=False)\n"
+        "print('x'.join(map(str, s.levels[-1].shape)))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=tree, env=env, capture_output=True, text=True
+    )
+    return out.stdout.strip() if out.returncode == 0 else "?"
+
+
+def run_case(case: str, tree: Path) -> dict:
+    """One windbench run of ``case`` with the code of checkout ``tree``."""
+    experiment, resolution, *scene = case.split(":")
+    scene = scene[0] if scene else "two_flags_wall"
+    overrides = [
+        f"experiment={experiment}", "wind=navier_stokes", f"scene={scene}",
+        f"grid.resolution={resolution}",
+    ]  # fmt: skip
+    with tempfile.TemporaryDirectory() as folder:
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        cmd = [sys.executable, "-m", "windbench", *overrides, f"hydra.run.dir={folder}"]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, cwd=tree, env=env, check=True, capture_output=True)
+        seconds = time.perf_counter() - t0
+        with xr.open_dataset(Path(folder) / "windbench.nc") as ds:
+            iterations = ds.pressure_iterations.values
+            project = ds.step_seconds.sel(phase="project").values
+            step = ds.step_seconds.sum("phase").values
+            shape = tuple(int(n) for n in ds.attrs["grid_shape"])
+            commit = str(ds.attrs["git_commit"])
+    return {
+        "date": datetime.date.today().isoformat(),
+        "commit": commit[:7] + ("+dirty" if "dirty" in commit else ""),
+        "experiment": experiment,
+        "scene": scene,
+        "resolution": int(resolution),
+        "shape": "x".join(map(str, shape)),
+        "coarsest_level": coarsest_level(tree, shape),
+        "steps": len(iterations),
+        "pressure_iterations_mean": round(float(iterations.mean()), 3),
+        "pressure_iterations_max": int(iterations.max()),
+        "project_ms_median": round(1e3 * float(sorted(project)[len(project) // 2]), 2),
+        "step_ms_median": round(1e3 * float(sorted(step)[len(step) // 2]), 2),
+        "run_seconds": round(seconds, 1),
+        "load_average_1min": round(os.getloadavg()[0], 2),
+        "command": "windbench " + " ".join(overrides),
+    }
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", nargs="+", default=list(CASES))
+    parser.add_argument("--trees", nargs="+", type=Path, default=[ROOT])
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args()
+    for case in args.cases:
+        rows = [run_case(case, tree.resolve()) for tree in args.trees]
+        show_and_append(args.out, rows, FIELDS, SHOWN)
+
+
+if __name__ == "__main__":
+    main()
