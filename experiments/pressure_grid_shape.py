@@ -13,7 +13,8 @@ window only (after the run's spin-up, ``sim.spinup``): a developed flow.
 
 Appends to experiments/results/pressure_grid_shape.csv (per run: the grid's shape, the
 multigrid's coarsest level, the recorded steps, the mean and max MGPCG iterations, the
-median projection and step times, the run's wall seconds and the load average).
+median projection time and median step (the ``total`` phase), the run's wall seconds
+and the load average).
 """
 
 from __future__ import annotations
@@ -34,7 +35,10 @@ from experiments.rows import show_and_append  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments/results/pressure_grid_shape.csv"
-CASES = ("paper:72", "paper:80", "paper:96", "paper:40:shirt")
+CASES = (
+    "paper:72", "paper:80", "paper:96", "paper:40:shirt", "reference:160",
+    "fence:94:fence", "fence:188:fence",
+)  # fmt: skip
 FIELDS = (
     "date", "commit", "experiment", "scene", "resolution", "shape", "coarsest_level",
     "steps", "pressure_iterations_mean", "pressure_iterations_max", "project_ms_median",
@@ -75,7 +79,7 @@ def run_case(case: str, tree: Path) -> dict:
         with xr.open_dataset(Path(folder) / "windbench.nc") as ds:
             iterations = ds.pressure_iterations.values
             project = ds.step_seconds.sel(phase="project").values
-            step = ds.step_seconds.sum("phase").values
+            step = ds.step_seconds.sel(phase="total").values
             shape = tuple(int(n) for n in ds.attrs["grid_shape"])
             commit = str(ds.attrs["git_commit"])
     return {
