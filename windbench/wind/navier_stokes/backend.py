@@ -186,7 +186,7 @@ class NavierStokesWind(WindField):
         "cfl": ("CFL number max|u| dt / h of the step", "1"),
         "cloth_cells": ("cells marked by the cloth (coupling)", "1"),
         "eddy_viscosity_max": ("largest eddy viscosity of the step (wind.turbulence)", "m2 s-1"),
-        "eddy_substeps": ("explicit substeps of the eddy-viscosity term", "1"),
+        "eddy_substeps": ("explicit stages of the eddy-viscosity term (Runge-Kutta-Legendre)", "1"),
     }
 
     @classmethod
@@ -267,7 +267,7 @@ class NavierStokesWind(WindField):
         self.smagorinsky_length2 = np.full(
             shape[2], (float(params.smagorinsky_constant) * self.h) ** 2
         )
-        self.nu_t = self._eddy_viscosity_model(float(params.mixing_length_limit))
+        self.nu_t, self.nu_face, self.stage_work = self._eddy_fields(params)
         self._u_cell = np.zeros((*shape, 3))
         self._cell_valid = False
         self._stats: dict[str, float] = {}
@@ -509,9 +509,22 @@ class NavierStokesWind(WindField):
             return None
         return np.where(self.solid.astype(bool), 0.0, layers[None, None, :])
 
+    def _eddy_fields(self, params) -> tuple:
+        """The eddy term's fields (:meth:`_eddy_diffusion`): nu_t per cell
+        (:meth:`_eddy_viscosity_model`), each component's face viscosities (float64) and
+        a buffer more for the Runge-Kutta-Legendre stages (velocity precision); all None
+        without an eddy viscosity."""
+        nu_t = self._eddy_viscosity_model(float(params.mixing_length_limit))
+        if nu_t is None:
+            return None, None, None
+        return nu_t, [np.zeros(x.shape) for x in self.q], [np.zeros_like(x) for x in self.q]
+
     def _eddy_diffusion(self, dt) -> tuple[float, int]:
-        """Eddy viscosity of the mean flow (:mod:`.turbulence`), explicit substeps;
-        returns (largest nu_t in m^2/s, substeps taken)."""
+        """Eddy viscosity of the mean flow (:mod:`.turbulence`): one explicit
+        Runge-Kutta-Legendre step of as many stages as its stability needs
+        (:func:`.turbulence.legendre_stages`), each component's through three buffers,
+        the ghost layer filled after each stage; returns (largest nu_t in m^2/s,
+        stages)."""
         if self.nu_t is None:
             return 0.0, 0
         if self.turbulence == "smagorinsky":
@@ -519,17 +532,33 @@ class NavierStokesWind(WindField):
                 *self.q, self.solid, self.axes, self.h, self.smagorinsky_length2, self.nu_t
             )
         peak = float(self.nu_t.max())
-        stable = turbulence.SUBSTEP_LIMIT / (2 * int(self.axes.sum()))
-        substeps = max(1, int(np.ceil(peak * dt / self.h**2 / stable)))
-        dt_h2 = dt / substeps / self.h**2
-        for _ in range(substeps):
-            for a in range(3):
-                turbulence.eddy_diffusion(
-                    self.q[a], a, self.nu_t, self.axes, dt_h2, self.free[a], self.work[a]
-                )
-            self.q, self.work = self.work, self.q
-            self._apply_boundaries(set_normal=True)
-        return peak, substeps
+        euler = turbulence.SUBSTEP_LIMIT / (2 * int(self.axes.sum()))  # nu dt / h^2
+        stages = turbulence.legendre_stages(peak * dt / self.h**2 / euler)
+        for a in range(3):
+            turbulence.face_viscosity(self.nu_t, a, self.nu_face[a])
+            self.q[a] = self._legendre_step(a, stages, dt / self.h**2)
+        self._apply_boundaries(set_normal=True)
+        return peak, stages
+
+    def _legendre_step(self, a: int, stages: int, dt_h2: float) -> np.ndarray:
+        """Component a after the RKL1 stages (:func:`.turbulence.legendre_stage`), in
+        one of the three buffers q[a], work[a], stage_work[a]; the other two become the
+        scratch ones."""
+        older, current = self.q[a], self.q[a]
+        spare = [self.work[a], self.stage_work[a]]
+        for j in range(1, stages + 1):
+            out = spare.pop()
+            stage = np.array(turbulence.legendre_stage(j, stages))
+            turbulence.eddy_diffusion(
+                current, older, self.nu_face[a], self.axes, dt_h2, self.free[a], stage, out
+            )
+            boundaries.fill_boundary(out, a, self.kinds, self.planes[a], True)
+            if older is not current:
+                spare.append(older)
+            older, current = current, out
+        rest = [x for x in (self.q[a], self.work[a], self.stage_work[a]) if x is not current]
+        self.work[a], self.stage_work[a] = rest
+        return current
 
     def _ground_drag(self, dt) -> None:
         """The rough ground's stress on the first layer of cells (:mod:`.wall_law`)."""

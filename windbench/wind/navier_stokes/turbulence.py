@@ -14,8 +14,12 @@ left out), in one of two closures:
   subgrid eddies (Smagorinsky 1963; C_s = ``wind.smagorinsky_constant``, Lilly 1967),
   vanishing as the grid is refined; strain rates on the MAC grid at cell centres.
 
-The term is taken explicitly, in as many equal substeps as keep nu_t dt / h^2 <=
-SUBSTEP_LIMIT / (2 d) (d active axes): stable at any nu_t. Solid cells have nu_t = 0.
+The term is taken explicitly, in one Runge-Kutta-Legendre step (RKL1, Meyer, Balsara and
+Aslam 2014) of as many stages s as keep nu_t dt / h^2 <= s (s + 1) / 2 SUBSTEP_LIMIT / (2 d)
+(d active axes): stable at any nu_t, where forward Euler needs that many substeps of
+SUBSTEP_LIMIT / (2 d) each, a number that grows as 1/h^2 (10 for the fence at 188 cells,
+where RKL1 takes 4 stages). Solid cells have nu_t = 0. Each stage reads the faces'
+viscosities from fields computed once per step (:func:`face_viscosity`).
 """
 
 from __future__ import annotations
@@ -95,35 +99,78 @@ def _face_nu(nu, I, J, K, a):
 
 
 @threaded()
-def eddy_diffusion(q, a, nu, axes, dt_h2, free, out):
-    """out = q + dt/h^2 sum_b [nu_+ (q_+b - q) - nu_- (q - q_-b)] on the free faces of
-    component a (nu between two faces: the mean of theirs), out = q elsewhere."""
-    P0, P1, P2 = q.shape
-    for I in prange(P0):
-        for J in range(P1):
-            for K in range(P2):
-                out[I, J, K] = q[I, J, K]
-    for I in prange(1, P0 - 1):
-        _eddy_plane(q, a, nu, axes, dt_h2, free, out, np.int64(I))
+def face_viscosity(nu, a, out):
+    """out[I, J, K] = nu_t at padded face (I, J, K) of component a (:func:`_face_nu`),
+    the ghost faces included: what :func:`eddy_diffusion` reads, computed once per step
+    rather than seven times per face in every substep."""
+    for I in prange(out.shape[0]):
+        for J in range(out.shape[1]):
+            for K in range(out.shape[2]):
+                out[I, J, K] = _face_nu(nu, I, J, K, a)
+
+
+def legendre_stages(r: float) -> int:
+    """The stages s of one RKL1 step (:func:`legendre_stage`) that take a step r times the
+    forward-Euler limit: the fewest with s (s + 1) / 2 >= r."""
+    s = 1
+    while s * (s + 1) < 2.0 * r:
+        s += 1
+    return s
+
+
+def legendre_stage(j: int, s: int) -> tuple[float, float, float]:
+    """(mu_j, nu_j, mu~_j) of stage j of the s-stage first-order Runge-Kutta-Legendre step
+    (Meyer, Balsara and Aslam 2014, RKL1): Y_0 = q, Y_1 = Y_0 + mu~_1 dt L Y_0,
+    Y_j = mu_j Y_(j-1) + nu_j Y_(j-2) + mu~_j dt L Y_(j-1), q_new = Y_s, with
+    w_1 = 2 / (s^2 + s), mu~_1 = w_1, mu_j = (2 j - 1) / j, nu_j = (1 - j) / j,
+    mu~_j = w_1 mu_j. Its amplification of an eigenmode L v = lambda v is the Legendre
+    polynomial P_s(1 + w_1 lambda dt), within [-1, 1] for lambda dt in [-(s^2 + s), 0]:
+    stable for s (s + 1) / 2 times the forward-Euler step, first order in time like it."""
+    w1 = 2.0 / (s * s + s)
+    if j == 1:
+        return 1.0, 0.0, w1
+    mu = (2.0 * j - 1.0) / j
+    return mu, (1.0 - j) / j, w1 * mu
+
+
+@threaded()
+def eddy_diffusion(q, older, nu_face, axes, dt_h2, free, stage, out):
+    """One RKL1 stage (:func:`legendre_stage`) of the eddy term of one component:
+    out = mu q + nu older + mu~ dt/h^2 sum_b [nu_+ (q_+b - q) - nu_- (q - q_-b)] on its
+    free faces, out = q elsewhere; ``stage`` = (mu, nu, mu~), (1, 0, 1) a forward-Euler
+    step. nu_face: its faces' nu_t (:func:`face_viscosity`), nu_+ and nu_- between two
+    faces the mean of theirs (so that the flux from a face to its neighbour is the
+    neighbour's from it: the term conserves momentum inside and is a symmetric operator)."""
+    for I in prange(q.shape[0]):
+        _eddy_plane(q, older, nu_face, axes, dt_h2, free, stage, out, np.int64(I))
 
 
 @njit(cache=True, error_model="numpy")
-def _eddy_plane(q, a, nu, axes, dt_h2, free, out, I):
-    """Padded plane I of :func:`eddy_diffusion`'s update (the parallel loop's body in a
-    function of its own, as :func:`_strain_plane`)."""
-    for J in range(1, q.shape[1] - 1):
-        for K in range(1, q.shape[2] - 1):
-            if not free[I, J, K]:
-                continue
+def _eddy_plane(q, older, nf, axes, dt_h2, free, stage, out, I):
+    """Padded plane I of :func:`eddy_diffusion` (the parallel loop's body in a function of
+    its own, as :func:`_strain_plane`); the ghost layer is copied."""
+    P0, P1, P2 = q.shape
+    mu, nu, rate = stage[0], stage[1], stage[2] * dt_h2
+    for J in range(P1):
+        if I == 0 or I == P0 - 1 or J == 0 or J == P1 - 1:
+            for K in range(P2):
+                out[I, J, K] = q[I, J, K]
+            continue
+        out[I, J, 0], out[I, J, P2 - 1] = q[I, J, 0], q[I, J, P2 - 1]
+        for K in range(1, P2 - 1):
             qc = q[I, J, K]
-            nc = _face_nu(nu, I, J, K, a)
+            if not free[I, J, K]:
+                out[I, J, K] = qc
+                continue
+            nc = nf[I, J, K]
             flux = 0.0
-            for b in range(3):
-                if axes[b] == 0:
-                    continue
-                e0, e1, e2 = int(b == 0), int(b == 1), int(b == 2)
-                n_plus = 0.5 * (nc + _face_nu(nu, I + e0, J + e1, K + e2, a))
-                n_minus = 0.5 * (nc + _face_nu(nu, I - e0, J - e1, K - e2, a))
-                flux += n_plus * (q[I + e0, J + e1, K + e2] - qc)
-                flux -= n_minus * (qc - q[I - e0, J - e1, K - e2])
-            out[I, J, K] = qc + dt_h2 * flux
+            if axes[0]:
+                flux += 0.5 * (nc + nf[I + 1, J, K]) * (q[I + 1, J, K] - qc)
+                flux -= 0.5 * (nc + nf[I - 1, J, K]) * (qc - q[I - 1, J, K])
+            if axes[1]:
+                flux += 0.5 * (nc + nf[I, J + 1, K]) * (q[I, J + 1, K] - qc)
+                flux -= 0.5 * (nc + nf[I, J - 1, K]) * (qc - q[I, J - 1, K])
+            if axes[2]:
+                flux += 0.5 * (nc + nf[I, J, K + 1]) * (q[I, J, K + 1] - qc)
+                flux -= 0.5 * (nc + nf[I, J, K - 1]) * (qc - q[I, J, K - 1])
+            out[I, J, K] = mu * qc + nu * older[I, J, K] + rate * flux
