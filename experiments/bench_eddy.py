@@ -7,6 +7,7 @@ same bits), and this checkout's phase as a run takes it (one Runge-Kutta-Legendr
 
     PYTHONPATH=. python experiments/bench_eddy.py --base REV [--cases fence:94 ...]
         [--settle 20] [--repeats 20] [--out CSV]
+    PYTHONPATH=. python experiments/bench_eddy.py --wake OTHER_CHECKOUT [--resolutions 94 188]
 
 A case is ``scene:resolution`` in the scene's own experiment (``fence`` for the fence,
 ``paper`` otherwise). Each case's wind is built and stepped ``--settle`` steps, then each
@@ -14,6 +15,13 @@ way runs ``--repeats`` times in turn from the same velocity (restored after each
 medians go to experiments/results/bench_eddy.csv with the substeps and stages, whether
 the two kernels give the same bits, and how far the Runge-Kutta-Legendre step's change
 of the velocity lies from the substeps' (largest difference over the largest change).
+
+``--wake`` runs the fence of ``experiment=fence`` (``wind=navier_stokes``) instead, once
+with this checkout and once with another (a checkout of the base revision), each in its
+own process, and writes to experiments/results/bench_eddy_wake.csv the eddy phase's and
+the whole step's medians, the stages or substeps per step, and the largest difference
+between the two runs' time-mean wake speed ratios (u/u0 at the wake probes): what the
+change of scheme does to the lee the fence comparison reports.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from experiments.rows import show_and_append  # noqa: E402
+from experiments.tree_runs import median_ms, run_in_tree  # noqa: E402
 from windbench.cli import compose_config  # noqa: E402
 from windbench.simulate import Obstacles, prepare  # noqa: E402
 from windbench.wind import make_wind  # noqa: E402
@@ -39,6 +48,11 @@ from windbench.wind.navier_stokes import boundaries, turbulence  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments/results/bench_eddy.csv"
+WAKE_OUT = OUT.with_name("bench_eddy_wake.csv")
+WAKE_FIELDS = (
+    "date", "commit", "resolution", "eddy_ms_median", "step_ms_median", "eddy_steps_mean",
+    "wake_ratio_max_difference", "run_seconds", "load_average_1min", "command",
+)  # fmt: skip
 MODULE = "windbench/wind/navier_stokes/turbulence.py"
 CASES = ("fence:94", "fence:188", "two_flags_wall:80")
 FIELDS = (
@@ -148,14 +162,51 @@ def bench(case: str, base, args) -> dict:
     }
 
 
+def wake(resolution: int, trees: list[Path]) -> list[dict]:
+    """The fence at ``resolution`` cells run with each checkout of ``trees`` (``--wake``)."""
+    overrides = [
+        "experiment=fence", "wind=navier_stokes", "scene=fence", f"grid.resolution={resolution}"
+    ]  # fmt: skip
+    ratios = []
+
+    def read(ds):
+        ratios.append(ds.wake_speed_ratio.mean("time").values)
+        return {
+            "eddy_ms_median": median_ms(ds, "eddy"),
+            "step_ms_median": median_ms(ds, "total"),
+            "eddy_steps_mean": float(ds.eddy_substeps.mean()),
+        }
+
+    rows = [run_in_tree(tree, overrides, read) for tree in trees]
+    apart = float(np.abs(ratios[0] - ratios[1]).max())
+    for row in rows:
+        row |= {
+            "date": datetime.date.today().isoformat(),
+            "resolution": resolution,
+            "wake_ratio_max_difference": round(apart, 5),
+            "load_average_1min": round(os.getloadavg()[0], 2),
+            "command": "windbench " + " ".join(overrides),
+        }
+    return rows
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--base", required=True)
+    parser.add_argument("--base", help="git revision of the kernels to compare with")
+    parser.add_argument("--wake", type=Path, help="another checkout: whole fence runs")
+    parser.add_argument("--resolutions", nargs="+", type=int, default=[94, 188])
     parser.add_argument("--cases", nargs="+", default=list(CASES))
     parser.add_argument("--settle", type=int, default=20)
     parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
+    if args.wake:
+        rows = [r for n in args.resolutions for r in wake(n, [ROOT, args.wake.resolve()])]
+        shown = ("commit", "resolution", "eddy_ms_median", "step_ms_median")
+        show_and_append(WAKE_OUT, rows, WAKE_FIELDS, (*shown, "wake_ratio_max_difference"))
+        return
+    if not args.base:
+        parser.error("--base REV or --wake CHECKOUT is required")
     with tempfile.TemporaryDirectory() as folder:
         base = load_base(args.base, Path(folder))
         rows = [bench(case, base, args) for case in args.cases]

@@ -24,14 +24,11 @@ import datetime
 import os
 import subprocess
 import sys
-import tempfile
-import time
 from pathlib import Path
-
-import xarray as xr
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from experiments.rows import show_and_append  # noqa: E402
+from experiments.tree_runs import median_ms, run_in_tree  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments/results/pressure_grid_shape.csv"
@@ -70,32 +67,27 @@ def run_case(case: str, tree: Path) -> dict:
         f"experiment={experiment}", "wind=navier_stokes", f"scene={scene}",
         f"grid.resolution={resolution}",
     ]  # fmt: skip
-    with tempfile.TemporaryDirectory() as folder:
-        env = {**os.environ, "PYTHONPATH": str(tree)}
-        cmd = [sys.executable, "-m", "windbench", *overrides, f"hydra.run.dir={folder}"]
-        t0 = time.perf_counter()
-        subprocess.run(cmd, cwd=tree, env=env, check=True, capture_output=True)
-        seconds = time.perf_counter() - t0
-        with xr.open_dataset(Path(folder) / "windbench.nc") as ds:
-            iterations = ds.pressure_iterations.values
-            project = ds.step_seconds.sel(phase="project").values
-            step = ds.step_seconds.sel(phase="total").values
-            shape = tuple(int(n) for n in ds.attrs["grid_shape"])
-            commit = str(ds.attrs["git_commit"])
+
+    def read(ds):
+        iterations = ds.pressure_iterations.values
+        shape = tuple(int(n) for n in ds.attrs["grid_shape"])
+        return {
+            "shape": "x".join(map(str, shape)),
+            "coarsest_level": coarsest_level(tree, shape),
+            "steps": len(iterations),
+            "pressure_iterations_mean": round(float(iterations.mean()), 3),
+            "pressure_iterations_max": int(iterations.max()),
+            "project_ms_median": median_ms(ds, "project"),
+            "step_ms_median": median_ms(ds, "total"),
+        }
+
+    row = run_in_tree(tree, overrides, read)
     return {
         "date": datetime.date.today().isoformat(),
-        "commit": commit[:7] + ("+dirty" if "dirty" in commit else ""),
         "experiment": experiment,
         "scene": scene,
         "resolution": int(resolution),
-        "shape": "x".join(map(str, shape)),
-        "coarsest_level": coarsest_level(tree, shape),
-        "steps": len(iterations),
-        "pressure_iterations_mean": round(float(iterations.mean()), 3),
-        "pressure_iterations_max": int(iterations.max()),
-        "project_ms_median": round(1e3 * float(sorted(project)[len(project) // 2]), 2),
-        "step_ms_median": round(1e3 * float(sorted(step)[len(step) // 2]), 2),
-        "run_seconds": round(seconds, 1),
+        **row,
         "load_average_1min": round(os.getloadavg()[0], 2),
         "command": "windbench " + " ".join(overrides),
     }
