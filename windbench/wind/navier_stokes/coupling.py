@@ -35,7 +35,7 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from windbench.arrays import cross
 from windbench.geometry.raster import segment_triangle
@@ -84,17 +84,17 @@ def remove_normal_component(q, a, u, v, w, index, normals, velocity, out):
     """out = q - ((u_air - v_cloth) . n) n_a on faces of component a next to marked cells.
 
     ``n`` and ``v_cloth`` are the normalised sum / mean of those of the (one or two)
-    marked cells beside the face; elsewhere out = q.
+    marked cells beside the face; elsewhere out = q. In scalars: a small array made per
+    face costs an allocation on every face of the grid.
     """
     nx, ny, nz = index.shape
     P0, P1, P2 = q.shape
-    for I in prange(1, P0 - 1):
+    for I in range(1, P0 - 1):
         for J in range(1, P1 - 1):
             for K in range(1, P2 - 1):
                 out[I, J, K] = q[I, J, K]
                 ip, jp, kp, im, jm, km = cells_beside(I, J, K, a)
-                n = np.zeros(3)
-                vc = np.zeros(3)
+                n0 = n1 = n2 = v0 = v1 = v2 = 0.0
                 cnt = 0
                 for side in range(2):
                     ci, cj, ck = (ip, jp, kp) if side == 1 else (im, jm, km)
@@ -102,22 +102,25 @@ def remove_normal_component(q, a, u, v, w, index, normals, velocity, out):
                         continue
                     m = index[ci, cj, ck]
                     if m >= 0:
-                        n += normals[m]
-                        vc += velocity[m]
+                        n0, n1, n2 = n0 + normals[m, 0], n1 + normals[m, 1], n2 + normals[m, 2]
+                        v0 += velocity[m, 0]
+                        v1 += velocity[m, 1]
+                        v2 += velocity[m, 2]
                         cnt += 1
                 if cnt == 0:
                     continue
-                norm = np.sqrt((n * n).sum())
+                norm = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
                 if norm == 0.0:
                     continue
-                n /= norm
-                vc /= cnt
-                air = np.zeros(3)
-                air[0] = at_face(u, 0, a, I, J, K)
-                air[1] = at_face(v, 1, a, I, J, K)
-                air[2] = at_face(w, 2, a, I, J, K)
-                rel = (air[0] - vc[0]) * n[0] + (air[1] - vc[1]) * n[1] + (air[2] - vc[2]) * n[2]
-                out[I, J, K] = q[I, J, K] - rel * n[a]  # u <- u - ((u - v) . n) n
+                n0, n1, n2 = n0 / norm, n1 / norm, n2 / norm
+                v0, v1, v2 = v0 / cnt, v1 / cnt, v2 / cnt
+                rel = (
+                    (at_face(u, 0, a, I, J, K) - v0) * n0
+                    + (at_face(v, 1, a, I, J, K) - v1) * n1
+                    + (at_face(w, 2, a, I, J, K) - v2) * n2
+                )
+                na = n0 if a == 0 else (n1 if a == 1 else n2)
+                out[I, J, K] = q[I, J, K] - rel * na  # u <- u - ((u - v) . n) n
 
 
 @njit(cache=True)
