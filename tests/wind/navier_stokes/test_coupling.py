@@ -219,3 +219,35 @@ def test_projection_coupling_with_the_second_order_scheme_is_refused():
     spec = box_scene(CHANNEL, [{"type": "uniform", "velocity": [U, 0, 0]}])
     with pytest.raises(ConfigError, match="wind.coupling"):
         make(spec, 8, coupling="projection", advection="second_order")
+
+
+def test_paper_coupling_removes_the_relative_normal_velocity_beside_marked_cells():
+    """In a uniform air velocity U, every face beside one marked cell (normal n, cloth
+    velocity v) becomes U_a - ((U - v) . n) n_a; a face between two marked cells uses the
+    normalised sum of their normals and the mean of their velocities; other faces keep U."""
+    from windbench.wind.navier_stokes.boundaries import padded_shape
+
+    shape, air = (4, 3, 5), np.array([3.0, -1.0, 0.5])
+    q = [np.full(padded_shape(shape, a), air[a]) for a in range(3)]
+    index = np.full(shape, -1, np.int64)
+    index[1, 1, 2], index[2, 1, 2] = 0, 1  # two marked cells, neighbours along x
+    normals = np.array([[0.6, 0.8, 0.0], [0.0, 0.0, 1.0]])
+    velocity = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, -1.0]])
+
+    def removed(n, v, a):
+        return air[a] - np.dot(air - v, n) * n[a]
+
+    shared = (normals[0] + normals[1]) / np.linalg.norm(normals[0] + normals[1])
+    for a in range(3):
+        out = np.zeros_like(q[a])
+        coupling.remove_normal_component(q[a], a, *q, index, normals, velocity, out)
+        expected = np.full(out.shape, air[a])
+        for cell, m in (((1, 1, 2), 0), ((2, 1, 2), 1)):
+            for side in (0, 1):  # the cell's - and + face of component a (padded indices)
+                face = [c + 1 for c in cell]
+                face[a] += side
+                expected[tuple(face)] = removed(normals[m], velocity[m], a)
+        if a == 0:  # the face between the two cells: both at once
+            expected[3, 2, 3] = removed(shared, velocity.mean(axis=0), a)
+        inner = (slice(1, -1),) * 3
+        np.testing.assert_allclose(out[inner], expected[inner], rtol=1e-12)
