@@ -1,0 +1,63 @@
+"""Where a run's step goes, checkout against checkout: the median of every phase of
+``step_seconds`` over the recorded window (after the spin-up) of one windbench run per
+case and checkout, each run in its own process, the runs of one case in turn.
+
+    PYTHONPATH=. python experiments/run_phases.py --trees . OTHER_CHECKOUT
+        [--cases paper:80:two_flags_wall ...] [--out CSV]
+
+A case is ``experiment:resolution:scene`` with ``wind=navier_stokes``. Appends to
+experiments/results/run_phases.csv one row per run: the code version the dataset
+records, the phases' medians in ms, the run's wall seconds and the load average.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from experiments.rows import show_and_append  # noqa: E402
+from experiments.tree_runs import median_ms, run_in_tree  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "experiments/results/run_phases.csv"
+CASES = ("paper:80:two_flags_wall", "paper:40:shirt")
+PHASES = ("total", "wind", "couple", "eddy", "advect", "diffuse", "project", "cloth", "aero")
+FIELDS = (
+    "date", "commit", "case", *(f"{p}_ms" for p in PHASES), "run_seconds",
+    "load_average_1min", "command",
+)  # fmt: skip
+
+
+def run_case(case: str, tree: Path) -> dict:
+    experiment, resolution, scene = case.split(":")
+    overrides = [
+        f"experiment={experiment}", "wind=navier_stokes", f"scene={scene}",
+        f"grid.resolution={resolution}",
+    ]  # fmt: skip
+    row = run_in_tree(tree, overrides, lambda ds: {f"{p}_ms": median_ms(ds, p) for p in PHASES})
+    return {
+        "date": datetime.date.today().isoformat(),
+        "case": case,
+        **row,
+        "load_average_1min": round(os.getloadavg()[0], 2),
+        "command": "windbench " + " ".join(overrides),
+    }
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", nargs="+", default=list(CASES))
+    parser.add_argument("--trees", nargs="+", type=Path, default=[ROOT])
+    parser.add_argument("--out", type=Path, default=OUT)
+    args = parser.parse_args()
+    for case in args.cases:
+        rows = [run_case(case, tree.resolve()) for tree in args.trees]
+        show_and_append(args.out, rows, FIELDS, ("commit", "case", "total_ms", "couple_ms"))
+
+
+if __name__ == "__main__":
+    main()
