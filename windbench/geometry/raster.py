@@ -21,40 +21,55 @@ from windbench.arrays import copy_head, cross
 
 
 @njit(cache=True, inline="always")
-def _axis_test(ax, ay, az, v0, v1, v2, half):
-    """True if the axis (ax, ay, az) separates the triangle (v0..v2, box-centred) from the box."""
-    p0 = ax * v0[0] + ay * v0[1] + az * v0[2]
-    p1 = ax * v1[0] + ay * v1[1] + az * v1[2]
-    p2 = ax * v2[0] + ay * v2[1] + az * v2[2]
+def _axis_test(ax, ay, az, v, half):
+    """True if the axis (ax, ay, az) separates the triangle (corners v = (x0, y0, z0, x1,
+    ..., z2), box-centred) from the box."""
+    p0 = ax * v[0] + ay * v[1] + az * v[2]
+    p1 = ax * v[3] + ay * v[4] + az * v[5]
+    p2 = ax * v[6] + ay * v[7] + az * v[8]
     r = half[0] * abs(ax) + half[1] * abs(ay) + half[2] * abs(az)
     return min(p0, p1, p2) > r or max(p0, p1, p2) < -r
 
 
+@njit(cache=True, inline="always")
+def _edge_separates(ex, ey, ez, v, half):
+    """True if one of the three axes edge (ex, ey, ez) x a box axis separates them."""
+    return (
+        _axis_test(0.0, -ez, ey, v, half)
+        or _axis_test(ez, 0.0, -ex, v, half)
+        or _axis_test(-ey, ex, 0.0, v, half)
+    )
+
+
 @njit(cache=True)
 def triangle_box_overlap(a, b, c, centre, half):
-    """True if triangle abc and the axis-aligned box (centre, half-widths) overlap (SAT)."""
-    v0 = a - centre
-    v1 = b - centre
-    v2 = c - centre
+    """True if triangle abc and the axis-aligned box (centre, half-widths) overlap (SAT).
+    In scalars (the corners as one tuple): small arrays made per test cost an allocation
+    each, and the registration runs it for every triangle and cell it may cut."""
+    v = (
+        a[0] - centre[0], a[1] - centre[1], a[2] - centre[2],
+        b[0] - centre[0], b[1] - centre[1], b[2] - centre[2],
+        c[0] - centre[0], c[1] - centre[1], c[2] - centre[2],
+    )  # fmt: skip
     for k in range(3):  # the box's face normals
-        if min(v0[k], v1[k], v2[k]) > half[k] or max(v0[k], v1[k], v2[k]) < -half[k]:
+        if min(v[k], v[3 + k], v[6 + k]) > half[k] or max(v[k], v[3 + k], v[6 + k]) < -half[k]:
             return False
-    e0 = v1 - v0
-    e1 = v2 - v1
-    e2 = v0 - v2
-    n = cross(e0, -e2)
+    e0 = (v[3] - v[0], v[4] - v[1], v[5] - v[2])
+    e1 = (v[6] - v[3], v[7] - v[4], v[8] - v[5])
+    w = (-(v[0] - v[6]), -(v[1] - v[7]), -(v[2] - v[8]))  # -e2, e2 = v0 - v2
+    nx = e0[1] * w[2] - e0[2] * w[1]  # n = e0 x (-e2)
+    ny = e0[2] * w[0] - e0[0] * w[2]
+    nz = e0[0] * w[1] - e0[1] * w[0]
     # the triangle's plane: n . x = n . v0
-    r = half[0] * abs(n[0]) + half[1] * abs(n[1]) + half[2] * abs(n[2])
-    if abs(n[0] * v0[0] + n[1] * v0[1] + n[2] * v0[2]) > r:
+    r = half[0] * abs(nx) + half[1] * abs(ny) + half[2] * abs(nz)
+    if abs(nx * v[0] + ny * v[1] + nz * v[2]) > r:
         return False
-    for e in (e0, e1, e2):  # the nine edge x axis cross products
-        if _axis_test(0.0, -e[2], e[1], v0, v1, v2, half):
-            return False
-        if _axis_test(e[2], 0.0, -e[0], v0, v1, v2, half):
-            return False
-        if _axis_test(-e[1], e[0], 0.0, v0, v1, v2, half):
-            return False
-    return True
+    # the nine edge x axis cross products
+    return not (
+        _edge_separates(e0[0], e0[1], e0[2], v, half)
+        or _edge_separates(e1[0], e1[1], e1[2], v, half)
+        or _edge_separates(-w[0], -w[1], -w[2], v, half)
+    )
 
 
 @njit(cache=True, inline="always")

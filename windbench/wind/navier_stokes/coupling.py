@@ -49,34 +49,34 @@ def cell_normals(positions, velocities, triangles, start, items, index, normals,
     """Per marked cell m (index[c] = m): area-weighted mean unit normal and cloth velocity.
 
     n_c = normalise(sum_t (b - a) x (c - a)),  v_c = sum_t A_t v_t / sum_t A_t,
-    v_t the mean of the triangle's vertex velocities.
+    v_t the mean of the triangle's vertex velocities. In scalars, as
+    :func:`remove_normal_component`.
     """
+    p, vel = positions, velocities
     for c in range(start.shape[0] - 1):
         m = index.flat[c]
         if m < 0:
             continue
-        nsum = np.zeros(3)
-        vsum = np.zeros(3)
-        asum = 0.0
+        n0 = n1 = n2 = s0 = s1 = s2 = asum = 0.0
         for e in range(start[c], start[c + 1]):
-            t = items[e]
-            a = positions[triangles[t, 0]]
-            b = positions[triangles[t, 1]]
-            cc = positions[triangles[t, 2]]
-            n = cross(b - a, cc - a)
-            area = 0.5 * np.sqrt((n * n).sum())
-            nsum += n
-            vt = (
-                velocities[triangles[t, 0]]
-                + velocities[triangles[t, 1]]
-                + velocities[triangles[t, 2]]
-            ) / 3.0
-            vsum += area * vt
+            ia, ib, ic = triangles[items[e], 0], triangles[items[e], 1], triangles[items[e], 2]
+            d = (p[ib, 0] - p[ia, 0], p[ib, 1] - p[ia, 1], p[ib, 2] - p[ia, 2])
+            f = (p[ic, 0] - p[ia, 0], p[ic, 1] - p[ia, 1], p[ic, 2] - p[ia, 2])
+            x, y, z = (
+                d[1] * f[2] - d[2] * f[1],
+                d[2] * f[0] - d[0] * f[2],
+                d[0] * f[1] - d[1] * f[0],
+            )
+            area = 0.5 * np.sqrt(x * x + y * y + z * z)
+            n0, n1, n2 = n0 + x, n1 + y, n2 + z
+            s0 += area * ((vel[ia, 0] + vel[ib, 0] + vel[ic, 0]) / 3.0)
+            s1 += area * ((vel[ia, 1] + vel[ib, 1] + vel[ic, 1]) / 3.0)
+            s2 += area * ((vel[ia, 2] + vel[ib, 2] + vel[ic, 2]) / 3.0)
             asum += area
-        norm = np.sqrt((nsum * nsum).sum())
-        for k in range(3):
-            normals[m, k] = nsum[k] / norm if norm > 0.0 else 0.0
-            velocity[m, k] = vsum[k] / asum if asum > 0.0 else 0.0
+        norm = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        for k, (nk, sk) in enumerate(((n0, s0), (n1, s1), (n2, s2))):
+            normals[m, k] = nk / norm if norm > 0.0 else 0.0
+            velocity[m, k] = sk / asum if asum > 0.0 else 0.0
 
 
 @njit(cache=True)
