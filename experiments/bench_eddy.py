@@ -40,7 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from experiments.rows import show_and_append  # noqa: E402
-from experiments.tree_runs import median_ms, run_in_tree  # noqa: E402
+from experiments.tree_runs import case_row, median_ms  # noqa: E402
 from windbench.cli import compose_config  # noqa: E402
 from windbench.simulate import Obstacles, prepare  # noqa: E402
 from windbench.wind import make_wind  # noqa: E402
@@ -177,16 +177,10 @@ def wake(resolution: int, trees: list[Path]) -> list[dict]:
             "eddy_steps_mean": float(ds.eddy_substeps.mean()),
         }
 
-    rows = [run_in_tree(tree, overrides, read) for tree in trees]
+    rows = [case_row(tree, overrides, read) for tree in trees]
     apart = float(np.abs(ratios[0] - ratios[1]).max())
     for row in rows:
-        row |= {
-            "date": datetime.date.today().isoformat(),
-            "resolution": resolution,
-            "wake_ratio_max_difference": round(apart, 5),
-            "load_average_1min": round(os.getloadavg()[0], 2),
-            "command": "windbench " + " ".join(overrides),
-        }
+        row |= {"resolution": resolution, "wake_ratio_max_difference": round(apart, 5)}
     return rows
 
 

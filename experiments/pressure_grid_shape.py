@@ -19,16 +19,13 @@ and the load average).
 
 from __future__ import annotations
 
-import argparse
-import datetime
 import os
 import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from experiments.rows import show_and_append  # noqa: E402
-from experiments.tree_runs import median_ms, run_in_tree  # noqa: E402
+from experiments.tree_runs import case_row, compare, median_ms  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments/results/pressure_grid_shape.csv"
@@ -81,28 +78,9 @@ def run_case(case: str, tree: Path) -> dict:
             "step_ms_median": median_ms(ds, "total"),
         }
 
-    row = run_in_tree(tree, overrides, read)
-    return {
-        "date": datetime.date.today().isoformat(),
-        "experiment": experiment,
-        "scene": scene,
-        "resolution": int(resolution),
-        **row,
-        "load_average_1min": round(os.getloadavg()[0], 2),
-        "command": "windbench " + " ".join(overrides),
-    }
-
-
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", nargs="+", default=list(CASES))
-    parser.add_argument("--trees", nargs="+", type=Path, default=[ROOT])
-    parser.add_argument("--out", type=Path, default=OUT)
-    args = parser.parse_args()
-    for case in args.cases:
-        rows = [run_case(case, tree.resolve()) for tree in args.trees]
-        show_and_append(args.out, rows, FIELDS, SHOWN)
+    row = case_row(tree, overrides, read)
+    return {"experiment": experiment, "scene": scene, "resolution": int(resolution), **row}
 
 
 if __name__ == "__main__":
-    main()
+    compare(__doc__, CASES, ROOT, OUT, run_case, FIELDS, SHOWN)

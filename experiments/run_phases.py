@@ -12,15 +12,11 @@ records, the phases' medians in ms, the run's wall seconds and the load average.
 
 from __future__ import annotations
 
-import argparse
-import datetime
-import os
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from experiments.rows import show_and_append  # noqa: E402
-from experiments.tree_runs import median_ms, run_in_tree  # noqa: E402
+from experiments.tree_runs import case_row, compare, median_ms  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "experiments/results/run_phases.csv"
@@ -38,26 +34,10 @@ def run_case(case: str, tree: Path) -> dict:
         f"experiment={experiment}", "wind=navier_stokes", f"scene={scene}",
         f"grid.resolution={resolution}",
     ]  # fmt: skip
-    row = run_in_tree(tree, overrides, lambda ds: {f"{p}_ms": median_ms(ds, p) for p in PHASES})
-    return {
-        "date": datetime.date.today().isoformat(),
-        "case": case,
-        **row,
-        "load_average_1min": round(os.getloadavg()[0], 2),
-        "command": "windbench " + " ".join(overrides),
-    }
-
-
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", nargs="+", default=list(CASES))
-    parser.add_argument("--trees", nargs="+", type=Path, default=[ROOT])
-    parser.add_argument("--out", type=Path, default=OUT)
-    args = parser.parse_args()
-    for case in args.cases:
-        rows = [run_case(case, tree.resolve()) for tree in args.trees]
-        show_and_append(args.out, rows, FIELDS, ("commit", "case", "total_ms", "couple_ms"))
+    read = lambda ds: {f"{p}_ms": median_ms(ds, p) for p in PHASES}  # noqa: E731
+    return {"case": case, **case_row(tree, overrides, read)}
 
 
 if __name__ == "__main__":
-    main()
+    shown = ("commit", "case", "total_ms", "couple_ms")
+    compare(__doc__, CASES, ROOT, OUT, run_case, FIELDS, shown)

@@ -3,6 +3,8 @@ comparing two versions run by run (``--trees`` of the scripts that use it)."""
 
 from __future__ import annotations
 
+import argparse
+import datetime
 import os
 import subprocess
 import sys
@@ -12,6 +14,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import xarray as xr
+
+from experiments.rows import show_and_append
 
 
 def run_in_tree(tree: Path, overrides: list[str], read: Callable[[xr.Dataset], dict]) -> dict:
@@ -38,3 +42,28 @@ def run_in_tree(tree: Path, overrides: list[str], read: Callable[[xr.Dataset], d
 def median_ms(ds: xr.Dataset, phase: str) -> float:
     """The median over the recorded steps of one phase of ``step_seconds``, in ms."""
     return round(1e3 * float(ds.step_seconds.sel(phase=phase).median()), 2)
+
+
+def case_row(tree: Path, overrides: list[str], read: Callable[[xr.Dataset], dict]) -> dict:
+    """:func:`run_in_tree` with the date, the load average after the run and the command."""
+    row = run_in_tree(tree, overrides, read)
+    return {
+        "date": datetime.date.today().isoformat(),
+        **row,
+        "load_average_1min": round(os.getloadavg()[0], 2),
+        "command": "windbench " + " ".join(overrides),
+    }
+
+
+def compare(doc: str, cases, root: Path, out: Path, run_case, fields, shown) -> None:
+    """The command line of a script that runs ``run_case(case, tree)`` for every case
+    (``--cases``) and checkout (``--trees``, runs of one case in turn) and appends the
+    rows to ``out`` (``--out``)."""
+    parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    parser.add_argument("--cases", nargs="+", default=list(cases))
+    parser.add_argument("--trees", nargs="+", type=Path, default=[root])
+    parser.add_argument("--out", type=Path, default=out)
+    args = parser.parse_args()
+    for case in args.cases:
+        rows = [run_case(case, tree.resolve()) for tree in args.trees]
+        show_and_append(args.out, rows, fields, shown)
