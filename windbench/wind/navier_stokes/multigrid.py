@@ -31,9 +31,9 @@ parallel loops instead of one per half sweep).
 The kernels work row by row along z, each row classified once per weight change
 (:func:`classify_rows`): ALL_OPEN rows use the constant 7-point stencil, ROW_CONSTANT rows
 per-row coefficients, GENERAL rows the face weights cell by cell. Reductions sum by planes,
-then the planes in order (:func:`ordered_sum`): the same numbers on any thread count. Without any pressure boundary the constant is removed from
-the right-hand side and each preconditioned residual. Convergence: ||r||_2 <= tol ||b||_2
-from the guess the caller gives (:mod:`.guess`).
+then the planes in order (:func:`ordered_sum`): the same numbers on any thread count.
+Without a pressure boundary the constant is removed from the right-hand side and each
+preconditioned residual. CG stops at ||r||_2 <= tol ||b||_2 (start: :mod:`.guess`).
 
 The per-cell and per-row helpers are plain compiled functions that LLVM inlines; numba's
 ``inline="always"`` gave the same numbers and speed for twice the compile time
