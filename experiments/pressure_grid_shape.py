@@ -6,8 +6,9 @@ median projection time of one windbench run per case, each run in its own proces
 
 A case is ``experiment:resolution[:scene]`` (scene two_flags_wall unless given) with
 ``wind=navier_stokes``. Each ``--trees`` entry is a checkout of windbench put first on
-PYTHONPATH and the working directory of its runs (the first one: this one), so that two versions of the solver are
-compared case by case, runs alternated in one invocation; the dataset's own
+PYTHONPATH and made the working directory of its runs (:mod:`experiments.tree_runs`;
+default: this one), so that two versions of the solver are compared case by case, runs
+alternated in one invocation; the dataset's own
 ``git_commit`` names the code each row ran. The statistics are taken over the recorded
 window only (after the run's spin-up, ``sim.spinup``): a developed flow.
 
