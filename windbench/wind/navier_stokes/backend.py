@@ -42,7 +42,6 @@ eddy viscosity and its substeps, and the phases couple, advect, diffuse, project
 
 from __future__ import annotations
 
-import logging
 import time
 from dataclasses import dataclass, field
 
@@ -97,8 +96,15 @@ PRECISION = ("float64", "float32")
 TOLERANCE_FLOOR = {"float64": 0.0, "float32": 1e-6}
 COUPLING = ("none", "paper", "projection")
 TURBULENCE = ("none", "smagorinsky", "mixing_length")
-log = logging.getLogger("windbench")
 DIFFUSION_MAX_SWEEPS = 500
+
+
+def _face_viscosities(nu_t, faces) -> None:
+    """faces[a] = nu_t at every face of component a (:func:`.turbulence.face_viscosity`),
+    whenever nu_t changes: once for ``mixing_length`` (again if bodies move), every step
+    for ``smagorinsky``."""
+    for a in range(3):
+        turbulence.face_viscosity(nu_t, a, faces[a])
 
 
 @dataclass
@@ -376,8 +382,9 @@ class NavierStokesWind(WindField):
                 self.free[a][...] = self.free_static[a]
             self.solid_faces = [self._faces_touching_solid(a) for a in range(3)]
             self._set_weights()
-            if self.turbulence == "mixing_length":
+            if self.turbulence == "mixing_length" and self.nu_t is not None:
                 self.nu_t = self._eddy_viscosity_model(float(self.params.mixing_length_limit))
+                _face_viscosities(self.nu_t, self.nu_face)
         self.solid_values = [
             body_velocity(
                 self.scene.bodies,
@@ -517,7 +524,9 @@ class NavierStokesWind(WindField):
         nu_t = self._eddy_viscosity_model(float(params.mixing_length_limit))
         if nu_t is None:
             return None, None, None
-        return nu_t, [np.zeros(x.shape) for x in self.q], [np.zeros_like(x) for x in self.q]
+        faces = [np.zeros(x.shape) for x in self.q]
+        _face_viscosities(nu_t, faces)
+        return nu_t, faces, [np.zeros_like(x) for x in self.q]
 
     def _eddy_diffusion(self, dt) -> tuple[float, int]:
         """Eddy viscosity of the mean flow (:mod:`.turbulence`): one explicit
@@ -531,11 +540,11 @@ class NavierStokesWind(WindField):
             turbulence.eddy_viscosity(
                 *self.q, self.solid, self.axes, self.h, self.smagorinsky_length2, self.nu_t
             )
+            _face_viscosities(self.nu_t, self.nu_face)
         peak = float(self.nu_t.max())
         euler = turbulence.SUBSTEP_LIMIT / (2 * int(self.axes.sum()))  # nu dt / h^2
         stages = turbulence.legendre_stages(peak * dt / self.h**2 / euler)
         for a in range(3):
-            turbulence.face_viscosity(self.nu_t, a, self.nu_face[a])
             self.q[a] = self._legendre_step(a, stages, dt / self.h**2)
         self._apply_boundaries(set_normal=True)
         return peak, stages
