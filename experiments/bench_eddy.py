@@ -1,7 +1,7 @@
 """The eddy-viscosity phase of the navier_stokes backend (``wind.turbulence``), A/B in
 one process on the same developed fields: the forward-Euler substeps with the kernel of
 another git revision (nu_t per cell, seven face viscosities per face and substep), the
-same substeps with this checkout's kernel (face viscosities computed once per step: the
+same substeps with this checkout's kernel (face viscosities computed for the step: the
 same bits), and this checkout's phase as a run takes it (one Runge-Kutta-Legendre step,
 :func:`windbench.wind.navier_stokes.turbulence.legendre_stage`).
 

@@ -19,7 +19,7 @@ Aslam 2014) of as many stages s as keep nu_t dt / h^2 <= s (s + 1) / 2 SUBSTEP_L
 (d active axes): stable at any nu_t, where forward Euler needs that many substeps of
 SUBSTEP_LIMIT / (2 d) each, a number that grows as 1/h^2 (10 for the fence at 188 cells,
 where RKL1 takes 4 stages). Solid cells have nu_t = 0. Each stage reads the faces'
-viscosities from fields computed once per step (:func:`face_viscosity`).
+viscosities from fields computed when nu_t changes (:func:`face_viscosity`).
 """
 
 from __future__ import annotations
@@ -101,8 +101,8 @@ def _face_nu(nu, I, J, K, a):
 @threaded()
 def face_viscosity(nu, a, out):
     """out[I, J, K] = nu_t at padded face (I, J, K) of component a (:func:`_face_nu`),
-    the ghost faces included: what :func:`eddy_diffusion` reads, computed once per step
-    rather than seven times per face in every substep."""
+    the ghost faces included: what :func:`eddy_diffusion` reads, computed when nu_t
+    changes rather than seven times per face in every stage."""
     for I in prange(out.shape[0]):
         for J in range(out.shape[1]):
             for K in range(out.shape[2]):
