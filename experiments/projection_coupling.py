@@ -4,14 +4,14 @@
   normal to a uniform 2 m/s wind in an 8 x 4 x 4 m channel (6 % blockage) after 2.5 s, at
   32, 48 and 64 cells along the channel, with the runs' default eddy viscosity
   (``mixing_length``; Hoerner: 1.17 for a free plate);
-- ``two_flags_wall``: the scene at 32 and 64 cells in a developed flow (the scene's automatic
-  spin-up, two flow-through times, then 4 s recorded) at dt 1/60 and 0.01, ``paper`` and
-  ``projection`` coupling and ``none`` (one-way: the §3 law in the wake the wall alone
-  makes): whether it completes, each flag's mean |F| over the recorded steps and the
-  sheltered-to-exposed force ratio.
+- ``two_flags_wall``: the scene at 32 and 64 cells (``--resolutions``) in a developed
+  flow (the scene's automatic spin-up, two flow-through times, then 4 s recorded) at dt
+  1/60 and 0.01 (``--dts``), ``paper`` and ``projection`` coupling and ``none`` (one-way:
+  the §3 law in the wake the wall alone makes): whether it completes, each flag's mean |F|
+  over the recorded steps and the sheltered-to-exposed force ratio.
 
     PYTHONPATH=$PWD python experiments/projection_coupling.py [--flags-only] [--out F]
-        [key=value ...]
+        [--resolutions 32 64] [--dts 0.016666666666666666 0.01] [key=value ...]
 
 writes ``experiments/results/projection_coupling.csv``; ``key=value`` overrides go to the
 flag runs (e.g. ``cloth.self_collision=true``). The force ratio's uncertainty: its spread
@@ -119,14 +119,16 @@ def flags(coupling: str, dt: float, resolution: int, extra: list[str]) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--flags-only", action="store_true", help="no plate runs")
+    parser.add_argument("--resolutions", type=int, nargs="+", default=[32, 64])
+    parser.add_argument("--dts", type=float, nargs="+", default=[1.0 / 60.0, 0.01])
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("overrides", nargs="*", help="key=value for the flag runs")
     args = parser.parse_args()
     rows = [] if args.flags_only else [plate_drag(n) for n in (32, 48, 64)]
     rows += [
         flags(c, dt, n, args.overrides)
-        for n in (32, 64)
-        for dt in (1.0 / 60.0, 0.01)
+        for n in args.resolutions
+        for dt in args.dts
         for c in ("paper", "projection", "none")
     ]
     keys = []
