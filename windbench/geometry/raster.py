@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from windbench.arrays import copy_head, cross
+from windbench.arrays import copy_head
 
 
 @njit(cache=True, inline="always")
@@ -152,29 +152,43 @@ def occupied_cells(start, shape) -> np.ndarray:
 
 @njit(cache=True)
 def segment_triangle(p0, p1, a, b, c):
-    """Fraction s in [0, 1] along p0 -> p1 where the segment meets triangle abc, or -1.
+    """Fraction s in [0, 1] along p0 -> p1 where the segment meets triangle abc, or -1
+    (3-vectors; :func:`segment_triangle_xyz` of their coordinates)."""
+    return segment_triangle_xyz(
+        p0[0], p0[1], p0[2], p1[0], p1[1], p1[2],
+        a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2],
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def segment_triangle_xyz(x0, y0, z0, x1, y1, z1, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """Fraction s in [0, 1] along (x0, y0, z0) -> (x1, y1, z1) where the segment meets the
+    triangle a b c, or -1.
 
     Möller-Trumbore: solve p0 + s (p1 - p0) = a + u (b - a) + v (c - a), with u, v >= 0,
-    u + v <= 1. A segment lying in the triangle's plane does not count as a hit.
+    u + v <= 1. A segment lying in the triangle's plane does not count as a hit. In
+    scalars: it runs for every grid face beside the cloth and every particle path piece
+    near it, where 3-vector temporaries cost a heap allocation each.
     """
-    d = p1 - p0
-    e1 = b - a
-    e2 = c - a
-    pv = cross(d, e2)
-    det = e1[0] * pv[0] + e1[1] * pv[1] + e1[2] * pv[2]
-    scale = np.sqrt((d * d).sum() * (e1 * e1).sum() * (e2 * e2).sum())
+    dx, dy, dz = x1 - x0, y1 - y0, z1 - z0
+    e1x, e1y, e1z = bx - ax, by - ay, bz - az
+    e2x, e2y, e2z = cx - ax, cy - ay, cz - az
+    pvx, pvy, pvz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x  # d x e2
+    det = e1x * pvx + e1y * pvy + e1z * pvz
+    d2 = dx * dx + dy * dy + dz * dz
+    scale = np.sqrt(d2 * (e1x * e1x + e1y * e1y + e1z * e1z) * (e2x * e2x + e2y * e2y + e2z * e2z))
     if scale == 0.0 or abs(det) <= 1e-12 * scale:
         return -1.0
     inv = 1.0 / det
-    tv = p0 - a
-    u = (tv[0] * pv[0] + tv[1] * pv[1] + tv[2] * pv[2]) * inv
+    tx, ty, tz = x0 - ax, y0 - ay, z0 - az
+    u = (tx * pvx + ty * pvy + tz * pvz) * inv
     if u < 0.0 or u > 1.0:
         return -1.0
-    qv = cross(tv, e1)
-    v = (d[0] * qv[0] + d[1] * qv[1] + d[2] * qv[2]) * inv
+    qx, qy, qz = ty * e1z - tz * e1y, tz * e1x - tx * e1z, tx * e1y - ty * e1x  # t x e1
+    v = (dx * qx + dy * qy + dz * qz) * inv
     if v < 0.0 or u + v > 1.0:
         return -1.0
-    s = (e2[0] * qv[0] + e2[1] * qv[1] + e2[2] * qv[2]) * inv
+    s = (e2x * qx + e2y * qy + e2z * qz) * inv
     if s < 0.0 or s > 1.0:
         return -1.0
     return s

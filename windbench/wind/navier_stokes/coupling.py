@@ -37,8 +37,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from windbench.arrays import cross
-from windbench.geometry.raster import segment_triangle
+from windbench.geometry.raster import segment_triangle_xyz
 from windbench.wind.navier_stokes.advection import at_face
 from windbench.wind.navier_stokes.boundaries import cells_beside
 from windbench.wind.navier_stokes.projection import psi_difference
@@ -128,75 +127,91 @@ def blocked_faces(positions, velocities, mobility, triangles, start, items, lowe
     """Faces crossed by cloth: rows (component, I, J, K) of padded indices, their normal
     velocity (v . n) n_a and their Poisson weight h x the mean ``mobility`` of the corners
     (:func:`move_membranes`) of the first triangle that crosses the segment between the
-    two cell centres beside the face."""
+    two cell centres beside the face (:func:`_first_crossing`). In scalars: the segment
+    test runs for each face beside a marked cell and each triangle registered there."""
     nx, ny, nz = shape[0], shape[1], shape[2]
     n_cells = nx * ny * nz
     rows = np.zeros((6 * (start[n_cells] + 1), 4), dtype=np.int64)
     vals = np.zeros(6 * (start[n_cells] + 1))
     weight = np.zeros(6 * (start[n_cells] + 1))
     count = 0
-    p0 = np.empty(3)
-    p1 = np.empty(3)
     for c in range(n_cells):
         if start[c + 1] == start[c]:
             continue
-        i = c // (ny * nz)
-        j = (c // nz) % ny
-        k = c % nz
+        i, j, k = c // (ny * nz), (c // nz) % ny, c % nz
         for a in range(3):
             for side in range(2):
-                off = np.zeros(3, dtype=np.int64)
-                off[a] = 1 if side == 1 else -1
-                i2, j2, k2 = i + off[0], j + off[1], k + off[2]
+                step = 1 if side == 1 else -1
+                di, dj, dk = step * (a == 0), step * (a == 1), step * (a == 2)
+                i2, j2, k2 = i + di, j + dj, k + dk
                 if i2 < 0 or j2 < 0 or k2 < 0 or i2 >= nx or j2 >= ny or k2 >= nz:
                     continue
                 c2 = (i2 * ny + j2) * nz + k2
                 if start[c2 + 1] > start[c2] and c2 < c:
                     continue  # the other marked cell tests this segment
-                p0[0] = lower[0] + (i + 0.5) * h
-                p0[1] = lower[1] + (j + 0.5) * h
-                p0[2] = lower[2] + (k + 0.5) * h
-                p1[0] = p0[0] + off[0] * h
-                p1[1] = p0[1] + off[1] * h
-                p1[2] = p0[2] + off[2] * h
-                hit = -1
-                for cell in (c, c2):
-                    for e in range(start[cell], start[cell + 1]):
-                        t = items[e]
-                        s = segment_triangle(
-                            p0,
-                            p1,
-                            positions[triangles[t, 0]],
-                            positions[triangles[t, 1]],
-                            positions[triangles[t, 2]],
-                        )
-                        if s >= 0.0:
-                            hit = t
-                            break
-                    if hit >= 0:
-                        break
+                x0 = lower[0] + (i + 0.5) * h
+                y0 = lower[1] + (j + 0.5) * h
+                z0 = lower[2] + (k + 0.5) * h
+                segment = (x0, y0, z0, x0 + di * h, y0 + dj * h, z0 + dk * h)
+                hit = _first_crossing(positions, triangles, start, items, c, segment)
+                if hit < 0:
+                    hit = _first_crossing(positions, triangles, start, items, c2, segment)
                 if hit < 0:
                     continue
-                ta = positions[triangles[hit, 0]]
-                tb = positions[triangles[hit, 1]]
-                tc = positions[triangles[hit, 2]]
-                n = cross(tb - ta, tc - ta)
-                n /= np.sqrt((n * n).sum())
-                vt = (
-                    velocities[triangles[hit, 0]]
-                    + velocities[triangles[hit, 1]]
-                    + velocities[triangles[hit, 2]]
-                ) / 3.0
-                vn = vt[0] * n[0] + vt[1] * n[1] + vt[2] * n[2]
                 rows[count, 0] = a
                 rows[count, 1] = max(i, i2) + 1 if a == 0 else i + 1
                 rows[count, 2] = max(j, j2) + 1 if a == 1 else j + 1
                 rows[count, 3] = max(k, k2) + 1 if a == 2 else k + 1
-                vals[count] = vn * n[a]
-                tri = triangles[hit]
-                weight[count] = h * (mobility[tri[0]] + mobility[tri[1]] + mobility[tri[2]]) / 3
+                vals[count] = _normal_velocity(positions, velocities, triangles, hit, a)
+                t0, t1, t2 = triangles[hit, 0], triangles[hit, 1], triangles[hit, 2]
+                weight[count] = h * (mobility[t0] + mobility[t1] + mobility[t2]) / 3
                 count += 1
     return rows[:count], vals[:count], weight[:count]
+
+
+@njit(cache=True)
+def _first_crossing(positions, triangles, start, items, cell, segment):
+    """The first triangle registered in ``cell`` that the ``segment`` (x0, y0, z0, x1,
+    y1, z1) crosses (:func:`~windbench.geometry.raster.segment_triangle_xyz`), or -1."""
+    x0, y0, z0, x1, y1, z1 = segment
+    for e in range(start[cell], start[cell + 1]):
+        t = items[e]
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        s = segment_triangle_xyz(
+            x0, y0, z0, x1, y1, z1,
+            positions[a, 0], positions[a, 1], positions[a, 2],
+            positions[b, 0], positions[b, 1], positions[b, 2],
+            positions[c, 0], positions[c, 1], positions[c, 2],
+        )  # fmt: skip
+        if s >= 0.0:
+            return t
+    return -1
+
+
+@njit(cache=True)
+def _triangle_normal(positions, triangles, t):
+    """(b - a) x (c - a) of triangle t = (a, b, c): its normal, of length twice its area."""
+    a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+    e1x, e1y = positions[b, 0] - positions[a, 0], positions[b, 1] - positions[a, 1]
+    e1z = positions[b, 2] - positions[a, 2]
+    e2x, e2y = positions[c, 0] - positions[a, 0], positions[c, 1] - positions[a, 1]
+    e2z = positions[c, 2] - positions[a, 2]
+    return e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+
+
+@njit(cache=True)
+def _normal_velocity(positions, velocities, triangles, t, axis):
+    """(v . n) n_axis: the normal velocity of triangle t (v the mean of its corners', n its
+    unit normal), component ``axis``."""
+    nx, ny, nz = _triangle_normal(positions, triangles, t)
+    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    nx, ny, nz = nx / norm, ny / norm, nz / norm
+    a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+    vx = (velocities[a, 0] + velocities[b, 0] + velocities[c, 0]) / 3.0
+    vy = (velocities[a, 1] + velocities[b, 1] + velocities[c, 1]) / 3.0
+    vz = (velocities[a, 2] + velocities[b, 2] + velocities[c, 2]) / 3.0
+    vn = vx * nx + vy * ny + vz * nz
+    return vn * (nx if axis == 0 else (ny if axis == 1 else nz))
 
 
 @njit(cache=True)
@@ -289,18 +304,16 @@ def balance_pockets(rhs, label, count):
 
 
 @njit(cache=True)
-def _straddling_cell(x, a, lower, h):
-    """(index, theta): the cell whose centre and the next one's along axis a straddle point
-    x (the cells of x on the other axes), and where x lies between the two centres (0 at
-    the lower, 1 at the upper)."""
-    index = np.empty(3, dtype=np.int64)
-    theta = 0.0
-    for b in range(3):
-        f = (x[b] - lower[b]) / h - (0.5 if b == a else 0.0)
-        index[b] = int(np.floor(f))
-        if b == a:
-            theta = f - index[b]
-    return index, theta
+def _straddling_cell(x, y, z, a, lower, h):
+    """(index, theta): the cell (a tuple) whose centre and the next one's along axis a
+    straddle the point (x, y, z) (the cells of the point on the other axes), and where the
+    point lies between the two centres (0 at the lower, 1 at the upper)."""
+    fx = (x - lower[0]) / h - (0.5 if a == 0 else 0.0)
+    fy = (y - lower[1]) / h - (0.5 if a == 1 else 0.0)
+    fz = (z - lower[2]) / h - (0.5 if a == 2 else 0.0)
+    index = (int(np.floor(fx)), int(np.floor(fy)), int(np.floor(fz)))
+    f = fx if a == 0 else (fy if a == 1 else fz)
+    return index, f - index[a]
 
 
 @njit(cache=True)
@@ -360,22 +373,28 @@ def triangle_pressure_loads(positions, triangles, psi, solid, free, lower, h, sc
     p / rho = ``scale`` psi; ``free``: the padded open-face masks of the three axes."""
     out = np.zeros((triangles.shape[0], 3))
     for t in range(triangles.shape[0]):
-        a = positions[triangles[t, 0]]
-        b = positions[triangles[t, 1]]
-        c = positions[triangles[t, 2]]
-        n = cross(b - a, c - a)  # |n| = 2 A
-        if (n * n).sum() == 0.0:
+        nx, ny, nz = _triangle_normal(positions, triangles, t)  # |n| = 2 A
+        if nx * nx + ny * ny + nz * nz == 0.0:
             continue
-        axis = int(np.argmax(np.abs(n)))
-        index, theta = _straddling_cell((a + b + c) / 3.0, axis, lower, h)
+        axis = 1 if abs(ny) > abs(nx) else 0  # the first largest |n_a|, as np.argmax
+        axis = 2 if abs(nz) > max(abs(nx), abs(ny)) else axis
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        index, theta = _straddling_cell(
+            (positions[a, 0] + positions[b, 0] + positions[c, 0]) / 3.0,
+            (positions[a, 1] + positions[b, 1] + positions[c, 1]) / 3.0,
+            (positions[a, 2] + positions[b, 2] + positions[c, 2]) / 3.0,
+            axis,
+            lower,
+            h,
+        )
         low = _side_pressure(psi, solid, free, index, axis, 0, -1, theta)
         high = _side_pressure(psi, solid, free, index, axis, 1, 2, 1.0 - theta)
         if np.isnan(low) or np.isnan(high):
             continue  # a side outside the grid or in a body: no jump
-        behind, before = (low, high) if n[axis] > 0.0 else (high, low)
+        n_axis = nx if axis == 0 else (ny if axis == 1 else nz)
+        behind, before = (low, high) if n_axis > 0.0 else (high, low)
         jump = 0.5 * scale * (behind - before)  # n has length 2 A
-        for k in range(3):
-            out[t, k] = jump * n[k]
+        out[t, 0], out[t, 1], out[t, 2] = jump * nx, jump * ny, jump * nz
     return out
 
 
