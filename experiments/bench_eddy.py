@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import importlib.util
 import os
 import subprocess
 import sys
@@ -40,7 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from experiments.rows import show_and_append  # noqa: E402
-from experiments.tree_runs import case_row, median_ms  # noqa: E402
+from experiments.tree_runs import case_row, median_ms, module_at  # noqa: E402
 from windbench.cli import compose_config  # noqa: E402
 from windbench.simulate import Obstacles, prepare  # noqa: E402
 from windbench.wind import make_wind  # noqa: E402
@@ -60,19 +59,6 @@ FIELDS = (
     "base_ms", "faces_ms", "legendre_ms", "faces_same_bits", "legendre_apart",
     "load_average_1min",
 )  # fmt: skip
-
-
-def load_base(rev: str, folder: Path):
-    """The turbulence module of git revision ``rev`` as a module of its own."""
-    source = subprocess.run(
-        ["git", "show", f"{rev}:{MODULE}"], cwd=ROOT, capture_output=True, text=True, check=True
-    ).stdout
-    path = folder / f"turbulence_{rev}.py"
-    path.write_text(source)
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def euler_substeps(wind, dt: float, substep) -> int:
@@ -202,7 +188,7 @@ def main():
     if not args.base:
         parser.error("--base REV or --wake CHECKOUT is required")
     with tempfile.TemporaryDirectory() as folder:
-        base = load_base(args.base, Path(folder))
+        base = module_at(args.base, MODULE, Path(folder), f"turbulence_{args.base}")
         rows = [bench(case, base, args) for case in args.cases]
     shown = ("scene", "resolution", "substeps", "stages", "base_ms", "faces_ms", "legendre_ms")
     show_and_append(args.out, rows, FIELDS, shown)

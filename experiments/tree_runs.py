@@ -1,10 +1,12 @@
-"""One windbench run with the code of a given checkout, in a process of its own: for
-comparing two versions run by run (``--trees`` of the scripts that use it)."""
+"""Code of another version, for comparing two versions: one windbench run with the code
+of a given checkout, in a process of its own (``--trees`` of the scripts that use it),
+or one module as a git revision has it, loaded beside this checkout's (``--base``)."""
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import importlib.util
 import os
 import subprocess
 import sys
@@ -16,6 +18,8 @@ from pathlib import Path
 import xarray as xr
 
 from experiments.rows import show_and_append
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_in_tree(tree: Path, overrides: list[str], read: Callable[[xr.Dataset], dict]) -> dict:
@@ -37,6 +41,29 @@ def run_in_tree(tree: Path, overrides: list[str], read: Callable[[xr.Dataset], d
         **row,
         "run_seconds": round(seconds, 1),
     }
+
+
+def module_at(rev: str | None, path: str, folder: Path, name: str, imports=None):
+    """File ``path`` of this repository as git revision ``rev`` has it (None: this
+    checkout's file), loaded as module ``name`` from a copy in ``folder``, which goes on
+    sys.path so that ``imports`` (old -> new text of its import lines) can point it at
+    modules loaded beside it: two versions of a kernel compiled alike in one process."""
+    if rev is None:
+        source = (ROOT / path).read_text()
+    else:
+        git = ["git", "show", f"{rev}:{path}"]
+        source = subprocess.run(git, cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    for old, new in (imports or {}).items():
+        source = source.replace(old, new)
+    file = folder / f"{name}.py"
+    file.write_text(source)
+    if str(folder) not in sys.path:
+        sys.path.insert(0, str(folder))
+    spec = importlib.util.spec_from_file_location(name, file)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
 
 
 def median_ms(ds: xr.Dataset, phase: str) -> float:
