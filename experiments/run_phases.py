@@ -5,7 +5,8 @@ case and checkout, each run in its own process, the runs of one case in turn.
     PYTHONPATH=. python experiments/run_phases.py --trees . OTHER_CHECKOUT
         [--cases paper:80:two_flags_wall ...] [--out CSV]
 
-A case is ``experiment:resolution:scene`` with ``wind=navier_stokes``. Appends to
+A case is ``experiment:resolution:scene`` with ``wind=navier_stokes``, then any further
+``:key=value`` overrides (``paper:64:two_flags_wall:wind.coupling=projection``). Appends to
 experiments/results/run_phases.csv one row per run: the code version the dataset
 records, the phases' medians in ms, the run's wall seconds and the load average.
 """
@@ -29,10 +30,10 @@ FIELDS = (
 
 
 def run_case(case: str, tree: Path) -> dict:
-    experiment, resolution, scene = case.split(":")
+    experiment, resolution, scene, *extra = case.split(":")
     overrides = [
         f"experiment={experiment}", "wind=navier_stokes", f"scene={scene}",
-        f"grid.resolution={resolution}",
+        f"grid.resolution={resolution}", *extra,
     ]  # fmt: skip
     read = lambda ds: {f"{p}_ms": median_ms(ds, p) for p in PHASES}  # noqa: E731
     return {"case": case, **case_row(tree, overrides, read)}
