@@ -22,7 +22,7 @@ from windbench.report.collect import (
     swept_keys,
     window_mask,
 )
-from windbench.report.comparison import pareto_front
+from windbench.report.comparison import pareto_front, spans_a_decade
 from windbench.report.figures import (
     cost_exponents,
     fit_exponent,
@@ -320,3 +320,19 @@ def test_a_crossing_in_one_step_of_the_window_is_the_runs_peak_and_its_scenes():
     assert table.loc["global", "runs"] == 2
     assert table.loc["global", "intersecting triangle pairs"] == 4.0
     assert table.loc["particles", "deepest body penetration (mm)"] == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize(
+    ("lo", "hi", "expected"),
+    [
+        (2.6, 8.0, False),
+        (0.5, 20.0, True),
+        (1.0, 3.0, True),
+        (0.11, 0.99, False),
+        (1e-3, 1.2, True),
+    ],
+)
+def test_a_cost_axis_spans_a_decade_when_it_holds_a_power_of_ten(lo, hi, expected):
+    """The accuracy-against-cost panels drop their minor tick labels only where a power of
+    ten gives a labelled major tick: the shirt's costs, 2.6 to 8 s, would have none."""
+    assert spans_a_decade(lo, hi) is expected

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 import pandas as pd
-from matplotlib.ticker import NullFormatter
+from matplotlib.ticker import FormatStrFormatter, NullFormatter
 
 from windbench.report.collect import display_path
 from windbench.report.figures import Drawn, Missing, _color, _figure, timed
@@ -185,6 +185,13 @@ def _legend_below(fig, handles_axes):
     fig.legend(handles.values(), labels.values(), loc="outside lower center", ncol=4, fontsize=7)
 
 
+def spans_a_decade(lo: float, hi: float) -> bool:
+    """Whether a log axis from ``lo`` to ``hi`` holds a power of ten: a major tick with a
+    label. A panel whose costs lie within one decade (the shirt's) has none; its minor
+    ticks are labelled instead."""
+    return math.floor(math.log10(hi)) >= math.ceil(math.log10(lo))
+
+
 def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn | Missing:
     """x: own time per simulated second (:func:`own_cost`), y: lee error, one panel per
     scene; Pareto front."""
@@ -210,7 +217,9 @@ def fig_accuracy_cost(table: pd.DataFrame, refs: dict[str, Reference]) -> Drawn 
         front = sub[sub["pareto"]].sort_values(COST_LABEL)
         ax.plot(front[COST_LABEL], front["lee_error"], "k--", lw=0.8)
         ax.set_xscale("log")
-        ax.xaxis.set_minor_formatter(NullFormatter())
+        # a power of ten labels the axis, else its minor ticks carry the only labels, short
+        short = NullFormatter() if spans_a_decade(*ax.get_xlim()) else FormatStrFormatter("%g")
+        ax.xaxis.set_minor_formatter(short)
         ax.set_title(scene, fontsize=9)
         ax.set_xlabel(COST_LABEL)
         ax.set_ylabel("lee error / U")
