@@ -155,21 +155,23 @@ def segment_triangle(p0, p1, a, b, c):
     """Fraction s in [0, 1] along p0 -> p1 where the segment meets triangle abc, or -1
     (3-vectors; :func:`segment_triangle_xyz` of their coordinates)."""
     return segment_triangle_xyz(
-        p0[0], p0[1], p0[2], p1[0], p1[1], p1[2],
-        a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2],
+        (p0[0], p0[1], p0[2]), (p1[0], p1[1], p1[2]),
+        (a[0], a[1], a[2]), (b[0], b[1], b[2]), (c[0], c[1], c[2]),
     )  # fmt: skip
 
 
 @njit(cache=True)
-def segment_triangle_xyz(x0, y0, z0, x1, y1, z1, ax, ay, az, bx, by, bz, cx, cy, cz):
-    """Fraction s in [0, 1] along (x0, y0, z0) -> (x1, y1, z1) where the segment meets the
-    triangle a b c, or -1.
+def segment_triangle_xyz(p0, p1, a, b, c):
+    """Fraction s in [0, 1] along p0 -> p1 where the segment meets the triangle a b c, or
+    -1; the points as (x, y, z) tuples.
 
     Möller-Trumbore: solve p0 + s (p1 - p0) = a + u (b - a) + v (c - a), with u, v >= 0,
     u + v <= 1. A segment lying in the triangle's plane does not count as a hit. In
     scalars: it runs for every grid face beside the cloth and every particle path piece
     near it, where 3-vector temporaries cost a heap allocation each.
     """
+    (x0, y0, z0), (x1, y1, z1) = p0, p1
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = a, b, c
     dx, dy, dz = x1 - x0, y1 - y0, z1 - z0
     e1x, e1y, e1z = bx - ax, by - ay, bz - az
     e2x, e2y, e2z = cx - ax, cy - ay, cz - az

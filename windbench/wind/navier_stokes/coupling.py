@@ -152,7 +152,7 @@ def blocked_faces(positions, velocities, mobility, triangles, start, items, lowe
                 x0 = lower[0] + (i + 0.5) * h
                 y0 = lower[1] + (j + 0.5) * h
                 z0 = lower[2] + (k + 0.5) * h
-                segment = (x0, y0, z0, x0 + di * h, y0 + dj * h, z0 + dk * h)
+                segment = ((x0, y0, z0), (x0 + di * h, y0 + dj * h, z0 + dk * h))
                 hit = _first_crossing(positions, triangles, start, items, c, segment)
                 if hit < 0:
                     hit = _first_crossing(positions, triangles, start, items, c2, segment)
@@ -171,17 +171,17 @@ def blocked_faces(positions, velocities, mobility, triangles, start, items, lowe
 
 @njit(cache=True)
 def _first_crossing(positions, triangles, start, items, cell, segment):
-    """The first triangle registered in ``cell`` that the ``segment`` (x0, y0, z0, x1,
-    y1, z1) crosses (:func:`~windbench.geometry.raster.segment_triangle_xyz`), or -1."""
-    x0, y0, z0, x1, y1, z1 = segment
+    """The first triangle registered in ``cell`` that the ``segment`` ((x0, y0, z0), (x1,
+    y1, z1)) crosses (:func:`~windbench.geometry.raster.segment_triangle_xyz`), or -1."""
+    p0, p1 = segment
     for e in range(start[cell], start[cell + 1]):
         t = items[e]
         a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
         s = segment_triangle_xyz(
-            x0, y0, z0, x1, y1, z1,
-            positions[a, 0], positions[a, 1], positions[a, 2],
-            positions[b, 0], positions[b, 1], positions[b, 2],
-            positions[c, 0], positions[c, 1], positions[c, 2],
+            p0, p1,
+            (positions[a, 0], positions[a, 1], positions[a, 2]),
+            (positions[b, 0], positions[b, 1], positions[b, 2]),
+            (positions[c, 0], positions[c, 1], positions[c, 2]),
         )  # fmt: skip
         if s >= 0.0:
             return t
