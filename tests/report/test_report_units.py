@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -24,6 +25,7 @@ from windbench.report.collect import (
 )
 from windbench.report.comparison import pareto_front, spans_a_decade
 from windbench.report.figures import (
+    _wake_span,
     cost_exponents,
     fit_exponent,
     hoerner_long_plate,
@@ -336,3 +338,14 @@ def test_a_cost_axis_spans_a_decade_when_it_holds_a_power_of_ten(lo, hi, expecte
     """The accuracy-against-cost panels drop their minor tick labels only where a power of
     ten gives a labelled major tick: the shirt's costs, 2.6 to 8 s, would have none."""
     assert spans_a_decade(lo, hi) is expected
+
+
+def test_a_lee_slice_spans_the_near_wake_inside_the_domain():
+    """Fig. 4/5's slices run from the inflow end to twice the view box's length beyond it
+    (two_flags_wall: the wall and flags within x = 1-4.9 m of a 24 m domain), and stop at
+    the outflow end of a shorter domain."""
+    scene = SimpleNamespace(lower=np.zeros(3), upper=np.array([24.0, 4.0, 6.0]))
+    lo, hi = np.array([1.0, 0.6, 0.0]), np.array([4.9, 4.0, 3.0])
+    assert _wake_span(scene, lo, hi) == pytest.approx((0.0, 12.7))
+    scene.upper[0] = 10.0
+    assert _wake_span(scene, lo, hi) == (0.0, 10.0)

@@ -464,6 +464,12 @@ def _arrival(ds: xr.Dataset, path) -> tuple[RunFrames | None, str]:
     return frames, f"At t = {t:.2f} s the particles' gust front stands at {where}. {ARRIVAL}"
 
 
+def _wake_span(scene: Scene, lo, hi) -> tuple[float, float]:
+    """x range of a lee slice: from the domain's inflow end to twice the view box's length
+    beyond it (the near wake, where the lee box lies), inside the domain."""
+    return float(scene.lower[0]), float(min(scene.upper[0], hi[0] + 2.0 * (hi[0] - lo[0])))
+
+
 def _lee_panels(records, scene_name, winds):
     present = [(w, pick(records, scene_name, w)) for w in winds]
     present = [(w, r) for w, r in present if r is not None]
@@ -482,11 +488,12 @@ def _lee_panels(records, scene_name, winds):
         for c, ((wind, rec), ds, speed) in enumerate(zip(present, datasets, speeds, strict=True)):
             scene = scene_of(ds)
             ax = fig.add_subplot(grid[0, c], projection="3d")
-            _draw_bodies_3d(ax, scene)
+            lo, hi = _view_box(scene, [ds["cloth_position"].values])  # the flags, the wall
+            _draw_bodies_3d(ax, scene, lo, hi)
             tris = ds["cloth_triangles"].values
             if tris.size:
                 _draw_cloth_3d(ax, ds["cloth_position"].isel(time=-1).values, tris)
-            _frame_3d(ax, scene.lower, scene.upper)
+            _frame_3d(ax, lo, hi)
             ax.set_title(f"{wind}  (t = {float(ds['time'].values[-1]):.2f} s)", fontsize=10)
             ax2 = fig.add_subplot(grid[1, c])
             im = ax2.imshow(
@@ -507,6 +514,7 @@ def _lee_panels(records, scene_name, winds):
                 pos = ds["cloth_position"].isel(time=-1).values
                 ax2.plot(pos[:, 0], pos[:, 1], ".", color="tab:red", ms=0.8)
             ax2.set_aspect("equal")
+            ax2.set_xlim(*_wake_span(scene, lo, hi))
             ax2.set_xlabel("x (m)")
             ax2.set_ylabel("y (m)")
             lsr = rec.figures.get("lee_speed_ratio", math.nan)
@@ -538,8 +546,9 @@ def fig45_two_flags_wall(records: Sequence[RunRecord]) -> Drawn | Missing:
             "`windbench -m scene=two_flags_wall wind=navier_stokes,particles`",
         )
     caption = (
-        "Final frame of each backend (top) and the wind speed in a horizontal slice through "
-        "the lee box (bottom; dark grey: the wall, red dots: cloth vertices). The wall stands "
+        "Final frame of each backend around the flags and the wall (top) and the wind speed "
+        "in a horizontal slice through the lee box, over the near wake (bottom; dark grey: "
+        "the wall, red dots: cloth vertices). The wall stands "
         "upwind of the second flag (y > 2 m); the global field ignores it by design (no "
         "lee); each slice's title gives the measured lee speed ratio and the force on the "
         "sheltered flag over that on the exposed one. "
