@@ -51,26 +51,19 @@ def cell_normals(positions, velocities, triangles, start, items, index, normals,
     v_t the mean of the triangle's vertex velocities. In scalars, as
     :func:`remove_normal_component`.
     """
-    p, vel = positions, velocities
     for c in range(start.shape[0] - 1):
         m = index.flat[c]
         if m < 0:
             continue
         n0 = n1 = n2 = s0 = s1 = s2 = asum = 0.0
         for e in range(start[c], start[c + 1]):
-            ia, ib, ic = triangles[items[e], 0], triangles[items[e], 1], triangles[items[e], 2]
-            d = (p[ib, 0] - p[ia, 0], p[ib, 1] - p[ia, 1], p[ib, 2] - p[ia, 2])
-            f = (p[ic, 0] - p[ia, 0], p[ic, 1] - p[ia, 1], p[ic, 2] - p[ia, 2])
-            x, y, z = (
-                d[1] * f[2] - d[2] * f[1],
-                d[2] * f[0] - d[0] * f[2],
-                d[0] * f[1] - d[1] * f[0],
-            )
+            x, y, z = _triangle_normal(positions, triangles, items[e])
+            vx, vy, vz = _mean_velocity(velocities, triangles, items[e])
             area = 0.5 * np.sqrt(x * x + y * y + z * z)
             n0, n1, n2 = n0 + x, n1 + y, n2 + z
-            s0 += area * ((vel[ia, 0] + vel[ib, 0] + vel[ic, 0]) / 3.0)
-            s1 += area * ((vel[ia, 1] + vel[ib, 1] + vel[ic, 1]) / 3.0)
-            s2 += area * ((vel[ia, 2] + vel[ib, 2] + vel[ic, 2]) / 3.0)
+            s0 += area * vx
+            s1 += area * vy
+            s2 += area * vz
             asum += area
         norm = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
         for k, (nk, sk) in enumerate(((n0, s0), (n1, s1), (n2, s2))):
@@ -200,16 +193,24 @@ def _triangle_normal(positions, triangles, t):
 
 
 @njit(cache=True)
+def _mean_velocity(velocities, triangles, t):
+    """The mean of triangle t's corner velocities."""
+    a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+    return (
+        (velocities[a, 0] + velocities[b, 0] + velocities[c, 0]) / 3.0,
+        (velocities[a, 1] + velocities[b, 1] + velocities[c, 1]) / 3.0,
+        (velocities[a, 2] + velocities[b, 2] + velocities[c, 2]) / 3.0,
+    )
+
+
+@njit(cache=True)
 def _normal_velocity(positions, velocities, triangles, t, axis):
     """(v . n) n_axis: the normal velocity of triangle t (v the mean of its corners', n its
     unit normal), component ``axis``."""
     nx, ny, nz = _triangle_normal(positions, triangles, t)
     norm = np.sqrt(nx * nx + ny * ny + nz * nz)
     nx, ny, nz = nx / norm, ny / norm, nz / norm
-    a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
-    vx = (velocities[a, 0] + velocities[b, 0] + velocities[c, 0]) / 3.0
-    vy = (velocities[a, 1] + velocities[b, 1] + velocities[c, 1]) / 3.0
-    vz = (velocities[a, 2] + velocities[b, 2] + velocities[c, 2]) / 3.0
+    vx, vy, vz = _mean_velocity(velocities, triangles, t)
     vn = vx * nx + vy * ny + vz * nz
     return vn * (nx if axis == 0 else (ny if axis == 1 else nz))
 
