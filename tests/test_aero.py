@@ -109,3 +109,28 @@ def test_random_triangles_give_finite_forces_whose_vertex_shares_sum_to_the_tota
     # the force never pushes along the relative velocity (it only resists or lifts)
     v_rel = v.mean(0) - u.mean(0)
     assert tri[0] @ v_rel <= 1e-9 * (1 + np.linalg.norm(tri[0]) * np.linalg.norm(v_rel))
+
+
+def test_cloth_forces_add_the_law_to_the_pressure_jump_when_asked():
+    """:func:`cloth_forces`: the §3 law alone without pressure loads; with them
+    (``wind.coupling=projection``) the jump, shared equally by the corners, plus the law
+    for ``subgrid_law``: the unit plate face-on to 7 m/s gets the law's 1/2 C_D rho v^2
+    more than the jump alone, and each corner a third of each triangle's force."""
+    from windbench.aero import cloth_forces
+
+    wind = np.tile((7.0, 0.0, 0.0), (4, 1))
+    still = np.zeros((4, 3))
+    loads = np.array([[3.0, 0.0, 0.0], [5.0, 0.0, 0.0]])  # m^4 s^-2 per triangle
+    law = 0.5 * P.drag_coefficient * P.air_density * 7.0**2
+    alone = cloth_forces(SQUARE, still, wind, SQUARE_TRIS, None, P)[0].sum(0)
+    assert alone[0] == pytest.approx(law, rel=1e-14)
+    jump = P.air_density * 8.0
+    for subgrid, expected in ((True, jump + law), (False, jump)):
+        params = AeroConfig(1.17, 0.6, 1.2, subgrid_law=subgrid)
+        tri, vert = cloth_forces(SQUARE, still, wind, SQUARE_TRIS, loads, params)
+        assert tri.sum(0)[0] == pytest.approx(expected, rel=1e-14)
+        np.testing.assert_allclose(vert.sum(0), tri.sum(0), rtol=1e-14)
+    pressure_only = cloth_forces(
+        SQUARE, still, wind, SQUARE_TRIS, loads, AeroConfig(subgrid_law=False)
+    )
+    np.testing.assert_allclose(pressure_only[1][1], P.air_density * 3.0 / 3.0 * np.array([1, 0, 0]))

@@ -28,10 +28,13 @@ Each triangle's force is shared equally by its three vertices, so the vertex for
 to the triangle force. Zero relative velocity or zero area gives zero force, never NaN.
 
 Where the wind's own solve closes the cloth (``navier_stokes`` with ``wind.coupling=
-projection``) the force on a triangle is instead the jump of the air's pressure across
-it, ``(p_front - p_back) n A`` (:func:`pressure_forces`): the air that the cloth stops
-pushes on it, and the §3 law, which sees only the relative velocity the coupled air no
-longer has, is not used.
+projection``) the force on a triangle is the jump of the air's pressure across it,
+``(p_front - p_back) n A`` (:func:`pressure_forces`): the air that the cloth stops pushes
+on it. With ``aero.subgrid_law`` the §3 law is added, on the relative velocity of the air
+at the cloth (:func:`cloth_forces`): the part of the flow that the grid does not stop.
+Where the cloth is resolved, the coupled air moves with it and that part vanishes; a
+cloth that lies within one layer of coarse cells closes few faces, the air passes
+through it, and the pressure jump alone would leave it without the wind's force.
 """
 
 from __future__ import annotations
@@ -143,4 +146,18 @@ def pressure_forces(loads, triangles, n_vertices: int, params: AeroConfig):
     vert = np.zeros((n_vertices, 3))
     for k in range(3):
         np.add.at(vert, triangles[:, k], tri / 3.0)
+    return tri, vert
+
+
+def cloth_forces(positions, velocities, wind, triangles, loads, params: AeroConfig):
+    """(per-triangle, per-vertex) forces (N) on the cloth: the §3 law
+    (:func:`aerodynamic_forces`) without ``loads``; with them (``wind.coupling=projection``)
+    the pressure jump (:func:`pressure_forces`), plus the §3 law when
+    ``params.subgrid_law`` (module docstring)."""
+    if loads is None:
+        return aerodynamic_forces(positions, velocities, wind, triangles, params)
+    tri, vert = pressure_forces(loads, triangles, positions.shape[0], params)
+    if params.subgrid_law:
+        law_tri, law_vert = aerodynamic_forces(positions, velocities, wind, triangles, params)
+        tri, vert = tri + law_tri, vert + law_vert
     return tri, vert

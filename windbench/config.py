@@ -150,6 +150,12 @@ class AeroConfig:
         0.6, "1", "C_L of the paper's section 3 lift law", ge=0, le=MAX_COEFFICIENT
     )
     air_density: float = setting(1.2, "kg m-3", "density of the air", gt=0)
+    subgrid_law: bool = setting(
+        True,
+        "",
+        "with wind.coupling=projection, add the section 3 law, on the air that passes "
+        "through the cloth, to the pressure jump (false: the pressure jump alone)",
+    )
 
 
 @dataclass

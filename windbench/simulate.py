@@ -23,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm.auto import tqdm
 
 from windbench import compile_ahead, metrics, runtime
-from windbench.aero import AeroParams, aerodynamic_forces, pressure_forces
+from windbench.aero import AeroParams, cloth_forces
 from windbench.cloth import check_cloth_solver, make_cloth_solver
 from windbench.cloth.model import ClothModel, ClothState
 from windbench.config import check_values
@@ -509,13 +509,14 @@ class Simulation:
         vertex_wind = (
             self.wind.sample(self.state.positions) if s.cloth.n_vertices else np.zeros((0, 3))
         )
-        loads = self.wind.cloth_pressure_loads()
-        if loads is not None:  # the air's own pressure acts on the cloth
-            tri_f, vert_f = pressure_forces(loads, s.cloth.triangles, s.cloth.n_vertices, s.aero)
-        else:  # paper §3
-            tri_f, vert_f = aerodynamic_forces(
-                self.state.positions, self.state.velocities, vertex_wind, s.cloth.triangles, s.aero
-            )
+        tri_f, vert_f = cloth_forces(
+            self.state.positions,
+            self.state.velocities,
+            vertex_wind,
+            s.cloth.triangles,
+            self.wind.cloth_pressure_loads(),  # the air's own pressure (projection coupling)
+            s.aero,
+        )
         t2 = time.perf_counter()
         self.state = self.cloth_solver.step(self.state, vert_f, s.dt)
         t3, c3 = time.perf_counter(), time.process_time()
