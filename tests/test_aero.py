@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from windbench.aero import aerodynamic_forces, plate_coefficients
+from windbench.aero import aerodynamic_forces, cloth_forces, plate_coefficients
 from windbench.config import AeroConfig
 
 P = AeroConfig(drag_coefficient=1.17, lift_coefficient=0.6, air_density=1.2)
@@ -116,8 +116,6 @@ def test_cloth_forces_add_the_law_to_the_pressure_jump_when_asked():
     (``wind.coupling=projection``) the jump, shared equally by the corners, plus the law
     for ``subgrid_law``: the unit plate face-on to 7 m/s gets the law's 1/2 C_D rho v^2
     more than the jump alone, and each corner a third of each triangle's force."""
-    from windbench.aero import cloth_forces
-
     wind = np.tile((7.0, 0.0, 0.0), (4, 1))
     still = np.zeros((4, 3))
     loads = np.array([[3.0, 0.0, 0.0], [5.0, 0.0, 0.0]])  # m^4 s^-2 per triangle
