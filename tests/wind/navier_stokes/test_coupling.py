@@ -1,8 +1,8 @@
 """Two-way coupling through pressure (``wind.coupling=projection``) against answers known
 without the code: a square plate's drag coefficient, a membrane across a channel carried at
 the channel's flow rate with the pressure jump that accelerates it, air enclosed by closed
-faces found and its Poisson right-hand side balanced, moving flags that stay finite, and
-a flag in a wall's lee that feels it."""
+faces found and its Poisson right-hand side balanced, moving flags that stay finite, a
+flag on a coarse grid that flies, and a flag in a wall's lee that feels it."""
 
 from __future__ import annotations
 
