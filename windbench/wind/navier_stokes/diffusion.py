@@ -6,7 +6,7 @@ Backward Euler for du/dt = nu lap u on the MAC faces:
 
 solved by one Jacobi sweep from q0 out of place (:func:`jacobi_first_sweep`: it also
 finds the field's scale, so the right-hand side needs no copy pass; at air's viscosity
-it is the only sweep up to 64^3 cells of the scaling scene), then red-black Gauss-Seidel
+it is the only sweep up to 128^3 cells of the scaling scene), then red-black Gauss-Seidel
 until the error bound of a contraction, rho / (1 - rho) times the largest update of the
 last sweep, is below ``tol`` times the field's scale: the Jacobi factor rho = 2 alpha d /
 (1 + 2 alpha d) (d active axes) is the max-norm contraction of the Jacobi sweep and
