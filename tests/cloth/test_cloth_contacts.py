@@ -25,6 +25,7 @@ from windbench.cloth.self_contact import (
     close_pairs,
     contact_pairs,
     descend,
+    grow_by_moves,
     leaf_pairs,
     live_patches,
     pair_reach,
@@ -246,9 +247,9 @@ def test_the_threads_find_the_serial_search_pairs_in_its_order():
     bounds = (fit.box, fit.dop, fit.cone, fit.live)
     args = (bounds, _COS_CONTACT, 0.02, _BRIDGE, _ROOT, _ROOT, limit, fit.stack)
     assert descend(two.tree, *args)[1] > 20  # tasks
-    vt, ee = contact_pairs(one, x, fit, 0.02)
+    vt, ee = contact_pairs(one, x, fit, 0.02, 0.02)
     assert len(vt) > 100 and len(ee) > 100
-    vt_2, ee_2 = contact_pairs(two, x, fit, 0.02)
+    vt_2, ee_2 = contact_pairs(two, x, fit, 0.02, 0.02)
     np.testing.assert_array_equal(vt_2, vt)
     np.testing.assert_array_equal(ee_2, ee)
 
@@ -264,7 +265,7 @@ def test_a_search_from_the_pushed_patches_finds_every_pair_with_a_pushed_vertex(
     sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
     fit = tree_fit(sc, x.shape[0])
     refit(sc.tree, sc.triangles, x, fit)
-    vt, ee = contact_pairs(sc, x, fit, 0.02)
+    vt, ee = contact_pairs(sc, x, fit, 0.02, 0.02)
     pushed = np.zeros(x.shape[0], np.bool_)
     pushed[np.random.default_rng(5).choice(x.shape[0], 12, replace=False)] = True
     live_patches(sc.tree, pushed, fit.live)
@@ -272,7 +273,7 @@ def test_a_search_from_the_pushed_patches_finds_every_pair_with_a_pushed_vertex(
     for k in range(len(tree.first)):
         own = tri[tree.order[tree.first[k] : tree.first[k] + tree.count[k]]]
         assert fit.live[k] == pushed[own].any()
-    vt_2, ee_2 = contact_pairs(sc, x, fit, 0.02)
+    vt_2, ee_2 = contact_pairs(sc, x, fit, 0.02, 0.02)
     want_vt = {(i, f) for i, f in vt.tolist() if pushed[i] or pushed[tri[f]].any()}
     want_ee = {(e, g) for e, g in ee.tolist() if pushed[edges[[e, g]]].any()}
     assert want_vt and want_ee
@@ -389,6 +390,80 @@ def test_the_close_pair_search_meets_each_pair_once_as_an_all_pairs_search_does(
     assert len(expected_vt) > 20 and len(expected_ee) > 20
     assert sorted(map(tuple, vt.tolist())) == sorted(expected_vt)
     assert sorted(found_ee) == sorted(expected_ee)
+
+
+def _grown_search(sc, x, moves, grow):
+    """(vertex-triangle pairs, edge pairs as vertex pairs) of the contacts' search at the
+    thickness over the bounds grown by ``moves`` (or not), cones left out, the narrow
+    phase at the largest pair's reach."""
+    fit = tree_fit(sc, x.shape[0])
+    refit(sc.tree, sc.triangles, x, fit)
+    if grow:
+        grow_by_moves(sc.tree, moves, fit.box, fit.dop)
+    pairs, found = leaf_pairs(sc.tree, fit, _NEVER_FLAT, sc.thickness, False)
+    reach = sc.thickness + 2.0 * moves.max()
+    vt, ee = close_pairs(sc, x, fit.box, pairs, found, reach)
+    edge = sc.tree.leaf_edge
+    rows = {tuple(sorted((tuple(edge[a]), tuple(edge[b])))) for a, b in ee}
+    return set(map(tuple, vt.tolist())), rows
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_bounds_grown_by_the_moves_find_every_pair_within_its_thickness_and_moves(seed):
+    """Each vertex of a crumpled sheet moved up to 30 mm since the last pass (at random):
+    the leaf pairs whose bounds, grown by those moves, come within the thickness hold every
+    vertex-triangle pair of an all-pairs search within thickness + d_i + d_f of the plane
+    (d_f the largest move of the triangle's corners) and every edge pair within thickness +
+    the largest moves of the two edges."""
+    model = ClothModel.from_meshes([_sheet((0.0, 0.0, 0.0), 1.0, 17)])
+    rng = np.random.default_rng(seed)
+    x = model.rest_positions + 0.03 * rng.standard_normal(model.rest_positions.shape)
+    thickness = 0.005
+    sc = self_contact_model(model.rest_positions, model.triangles, thickness)
+    moves = 0.03 * rng.random(x.shape[0])
+    tris = [tuple(int(v) for v in t) for t in sc.triangles]
+    expected_vt = {
+        (i, f)
+        for f, t in enumerate(tris)
+        for i in range(x.shape[0])
+        if i not in t
+        and _vertex_near_triangle(x, i, t, thickness + moves[i] + moves[list(t)].max())
+    }
+    edges = sorted({tuple(sorted((t[k], t[(k + 1) % 3]))) for t in tris for k in range(3)})
+    expected_ee = {
+        (e, g)
+        for n, e in enumerate(edges)
+        for g in edges[n + 1 :]
+        if not set(e) & set(g)
+        and _edges_close(x, *e, *g, thickness + moves[list(e)].max() + moves[list(g)].max())
+    }
+    vt, ee = _grown_search(sc, x, moves, True)
+    assert len(expected_vt) > 20 and len(expected_ee) > 20
+    assert expected_vt <= vt and expected_ee <= ee
+
+
+def test_bounds_grown_by_the_moves_reach_a_sheet_that_moved_fast():
+    """Two parallel sheets (apart at rest, so that no patch holds both) now 30 mm apart,
+    thickness 5 mm; the upper one moved 30 mm since the last pass, the lower one not: every
+    vertex lies within 5 + 30 mm, its pair's reach, of the other sheet's triangles. The
+    grown bounds find such a pair for every vertex, the bounds not grown none."""
+    lower, upper = (
+        _sheet((0.0, 0.0, 0.0), 1.0, 9, name="a"),
+        _sheet((0.0, 0.0, 1.0), 1.0, 9, name="b"),
+    )
+    model = ClothModel.from_meshes([lower, upper])
+    sc = self_contact_model(model.rest_positions, model.triangles, 0.005)
+    sheet = (model.rest_positions[:, 2] > 0.5).astype(int)  # 1: the upper one
+    x = model.rest_positions.copy()
+    x[sheet == 1, 2] = 0.03
+    moves = 0.03 * sheet
+    tri_sheet = sheet[sc.triangles[:, 0]]
+
+    def across(pairs):
+        return {i for i, f in pairs if sheet[i] != tri_sheet[f]}
+
+    assert across(_grown_search(sc, x, moves, True)[0]) == set(range(x.shape[0]))
+    assert across(_grown_search(sc, x, moves, False)[0]) == set()
 
 
 def test_the_patch_hierarchy_partitions_the_triangles_and_knows_separate_pieces():

@@ -2,42 +2,42 @@
 edges, culled by a bounding-volume hierarchy with normal cones. The paper's cloth system
 [MKE03] keeps cloth from passing through itself. All cloths are one mesh
 (:class:`~windbench.cloth.model.ClothModel`): one pass handles a flag folding on itself and
-two flags touching alike. Thickness-based, not continuous: a vertex i closer
-than ``cloth.thickness`` to a triangle (a, b, c) it does not belong to, with its projection
+two flags touching alike. Thickness-based, not continuous: a vertex i closer than
+``cloth.thickness`` to a triangle (a, b, c) it does not belong to, with its projection
 q = sum_k beta_k x_k inside the triangle, is pushed back to the thickness on the side it
 lay on at the last pass (sign s of its distance to the triangle's plane then):
 
     C = s (x_i - q) . n - thickness < 0,   den = w_i + sum_k beta_k^2 w_k,
     dx_i = -C w_i s n / den,   dx_k = C beta_k w_k s n / den,
 
-skipped for a triangle turned over since (normal reversed: its sides swapped, not the
-vertex's). A pair is searched within max(REACH thickness, d_1 + d_2 + thickness) of the
-plane, d_1 and d_2 the largest moves since the last pass of the vertex and of the
-triangle's corners (:func:`pair_reach`): a crossing since then lies within d_1 + d_2 of the
-plane, and a pair that moved little is not pushed far because another part of the cloth
-moved fast. Edges that cross without a vertex near a triangle (a sheet draped over
-another's border) are kept apart the same way at their closest points (:func:`push_edges`,
-n = e1 x e2).
+skipped for a triangle turned over since (normal reversed: its sides swapped). The search
+finds every pair within d_1 + d_2 + thickness, d_1 and d_2 the largest moves since the
+last pass of the vertex and of the triangle's corners: a crossing since then lies within
+d_1 + d_2 of the plane. A pair found is judged within max(REACH thickness, d_1 + d_2 +
+thickness) (:func:`pair_reach`): that also brings back a vertex that a push earlier in the
+pass carried behind a triangle, and a pair that moved little is not pushed far because
+another part moved fast. Edges that cross without a vertex near a triangle (a sheet over
+another's border) are kept apart the same way at their closest points (:func:`push_edges`).
 
 Broad phase (:func:`leaf_pairs`): a fixed hierarchy of triangle patches
 (:func:`patch_tree`: median splits of the rest-pose centroids, leaves of at most LEAF
 triangles) whose bounds (boxes and diagonal bounds: 18-DOPs, as the k-DOP hierarchies of
 [MKE03]) and normal cones are refitted every substep (:func:`refit`). A patch is tested
-against itself only when it is not flat, two patches only when their bounds come within
-the reach and they are not one flat patch together. Flat: a connected patch
-whose normals lie within a cone below 90 degrees is a height field over the plane normal
-to the cone's axis and cannot meet itself (Volino and Magnenat-Thalmann 1994; Provot 1997
-uses the same cones for cloth). Their second condition, that the patch's contour does not
-overlap itself in that projection, is not tested, as in most cloth solvers: the contacts
-miss a flat patch that overlaps itself (a twist, a spiral ramp) until it stops being flat.
-They use a narrower cone, CONTACT_CONE: within it, two points of the patch within the
-reach of each other lie within reach / cos(CONTACT_CONE) of each other along the surface,
-neighbours that the thickness test would reject anyway. Threads search a large cloth's
-subtree pairs at once, with the same result (:func:`contact_pairs`).
+against itself only when it is not flat, two patches only when their bounds, grown by their
+vertices' largest move since the last pass (:func:`grow_by_moves`: far only where the cloth
+moved fast), come within the thickness and they are not one flat patch together. Flat: a
+connected patch whose normals lie within a cone below 90 degrees is a height field over
+the plane normal to the cone's axis and cannot meet itself (Volino and Magnenat-Thalmann
+1994; Provot 1997 uses the same cones for cloth). Their second condition, that the patch's
+contour does not overlap itself in that projection, is not tested, as in most cloth
+solvers: the contacts miss a flat patch that overlaps itself (a twist, a spiral ramp) until
+it stops being flat. They use a narrower cone, CONTACT_CONE: within it, two points of the
+patch within the reach of each other lie within reach / cos(CONTACT_CONE) of each other
+along the surface, neighbours that the thickness test would reject anyway. Threads search
+a large cloth's subtree pairs at once, with the same result (:func:`contact_pairs`).
 
 The figure :func:`self_intersections` counts intersecting triangle pairs (Moeller-Trumbore)
-through the same hierarchy by its bounds alone, equal to an all-pairs search (cones would
-miss two adjacent patches, within 90 degrees, that cross in a crumpled flag).
+through the hierarchy by its bounds alone, as an all-pairs search (a crumple's cones miss some).
 """
 
 from __future__ import annotations
@@ -356,16 +356,49 @@ def refit(tree, triangles, p, fit):
             _leaf_bounds(corners, ptr[k], ptr[k + 1], p, box, dop, k)
             continue
         l, r = left[k], right[k]
+        _union_bounds(box, dop, k, l, r)
         for a in range(3):
-            box[k, a] = min(box[l, a], box[r, a])
-            box[k, 3 + a] = max(box[l, 3 + a], box[r, 3 + a])
             cone[k, a] = cone[l, a] + cone[r, a]
-        for a in range(6):
-            dop[k, a] = min(dop[l, a], dop[r, a])
-            dop[k, 6 + a] = max(dop[l, 6 + a], dop[r, 6 + a])
         cl, sl = _widened(cone[k, 0], cone[k, 1], cone[k, 2], cone, l)
         cr, sr = _widened(cone[k, 0], cone[k, 1], cone[k, 2], cone, r)
         cone[k, 3], cone[k, 4] = (cl, sl) if cl < cr else (cr, sr)
+
+
+@njit(cache=True)
+def _union_bounds(box, dop, k, l, r):
+    """The box and diagonal bounds of node k: those of its children l and r joined."""
+    for a in range(3):
+        box[k, a] = min(box[l, a], box[r, a])
+        box[k, 3 + a] = max(box[l, 3 + a], box[r, 3 + a])
+    for a in range(6):
+        dop[k, a] = min(dop[l, a], dop[r, a])
+        dop[k, 6 + a] = max(dop[l, 6 + a], dop[r, 6 + a])
+
+
+@njit(cache=True)
+def grow_by_moves(tree, moves, box, dop):
+    """The bounds of :func:`refit` grown by how far the patches' vertices moved since the
+    last pass: each leaf's box by the largest ``moves`` M_k of its corners, its diagonal
+    bounds by sqrt(2) M_k (a move d changes x + y by at most sqrt(2) d), the inner nodes
+    the union of their children's. Two patches whose grown bounds come within the
+    thickness then hold every vertex-triangle and edge pair within its
+    :func:`pair_reach`, at most thickness + M_a + M_b: the search of the contacts
+    (:func:`self_contacts`) reaches far only where the cloth moved fast."""
+    left, right, ptr, corners = tree.left, tree.right, tree.corner_ptr, tree.leaf_corner
+    for k in range(left.shape[0] - 1, -1, -1):
+        if left[k] >= 0:
+            _union_bounds(box, dop, k, left[k], right[k])
+            continue
+        m = 0.0
+        for j in range(ptr[k], ptr[k + 1]):
+            m = max(m, moves[corners[j]])
+        d = _SQRT2 * m
+        for a in range(3):
+            box[k, a] -= m
+            box[k, 3 + a] += m
+        for a in range(6):
+            dop[k, a] -= d
+            dop[k, 6 + a] += d
 
 
 @njit(cache=True)
@@ -558,31 +591,30 @@ def descend(tree, bounds, cos_flat, gap, bridge, a0, b0, limit, stack):
 
 
 @njit(cache=True)
-def contact_pairs(sc, p, fit, reach):
-    """:func:`close_pairs` of the contacts' :func:`leaf_pairs` within ``reach``: on one
+def contact_pairs(sc, p, fit, gap, reach):
+    """:func:`close_pairs` within ``reach`` of the contacts' :func:`leaf_pairs` within
+    ``gap`` (of the bounds in ``fit``, grown or not: :func:`grow_by_moves`): on one
     thread, or, for a model searched on threads (:func:`search_threads`), split into the tasks
     of :func:`descend` searched by numba's threads one task at a time
     (:func:`_task_search`) and joined in the task order: the same pairs in the same order
     either way, so the same pushes and the same bits."""
     if sc.threads < 2:
-        pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, reach, _BRIDGE)
+        pairs, found = leaf_pairs(sc.tree, fit, _COS_CONTACT, gap, _BRIDGE)
         return close_pairs(sc, p, fit.box, pairs, found, reach)
     bounds, limit = _search_bounds(fit), _task_limit(sc)
-    tasks, n = descend(
-        sc.tree, bounds, _COS_CONTACT, reach, _BRIDGE, _ROOT, _ROOT, limit, fit.stack
-    )
-    vt, ee, _ = _task_search(sc, p, fit, tasks, n, reach, _CONTACTS)
+    tasks, n = descend(sc.tree, bounds, _COS_CONTACT, gap, _BRIDGE, _ROOT, _ROOT, limit, fit.stack)
+    vt, ee, _ = _task_search(sc, p, fit, tasks, n, gap, reach, _CONTACTS)
     return vt, ee
 
 
 @njit(cache=True, parallel=True)
-def _task_search(sc, p, fit, tasks, n, reach, crossings):
+def _task_search(sc, p, fit, tasks, n, gap, reach, crossings):
     """(vertex-triangle pairs, edge pairs, crossings) of the tasks tasks[:n] of
-    :func:`descend`, searched in a parallel loop over the model's threads, thread w of T
-    taking tasks w, w + T, w + 2 T, ... with its own stack: with ``crossings``, the
-    intersecting triangle pairs of :func:`_threaded_crossing_count` (boxes alone, gap 0),
-    summed; else the close pairs within ``reach`` of :func:`contact_pairs`, joined in the
-    task order. Dealt out so, neighbouring tasks, which cost alike (a fold is one patch of
+    :func:`descend` (leaf pairs within ``gap``), searched in a parallel loop over the
+    model's threads, thread w of T taking tasks w, w + T, w + 2 T, ... with its own stack:
+    with ``crossings``, the intersecting triangle pairs of
+    :func:`_threaded_crossing_count` (boxes alone, gap 0), summed; else the close pairs
+    within ``reach`` of :func:`contact_pairs`, joined in the task order. Dealt out so, neighbouring tasks, which cost alike (a fold is one patch of
     the cloth), go to different threads: in contiguous halves the first held 82 % of a
     flapping 64 x 64 flag's leaf pairs."""
     vt_parts, ee_parts = List(), List()
@@ -601,7 +633,7 @@ def _task_search(sc, p, fit, tasks, n, reach, crossings):
         own, bounds = np.empty_like(stack), (box, dop, cone, live)
         for t in range(w, n, workers):
             a, b = tasks[t, 0], tasks[t, 1]
-            pairs, found = descend(tree, bounds, cos_flat, reach, bridge, a, b, _LEAVES, own)
+            pairs, found = descend(tree, bounds, cos_flat, gap, bridge, a, b, _LEAVES, own)
             if crossings:
                 counts[w] += _crossings(tree, triangles, p, pairs, found)
             else:
@@ -903,9 +935,10 @@ def _close_edges(tree, p, box, eb, pairs, found, reach):
 def self_contacts(sc, inv_mass, p, x0, fit):
     """One pass of the contacts of the module docstring, each vertex and edge kept on the
     side it lay on at ``x0`` (the last pass's positions) and searched within its pair's
-    reach (:func:`pair_reach` of the moves since ``x0``): over the leaf patches that may
-    touch within the largest pair reach (:func:`leaf_pairs` after :func:`refit`, then
-    :func:`close_pairs`), vertices against triangles, then edges against edges. Returns
+    reach (:func:`pair_reach` of the moves since ``x0``): over the leaf patches whose
+    bounds grown by those moves come within the thickness (:func:`leaf_pairs` after
+    :func:`refit` and :func:`grow_by_moves`), the pairs within the largest pair reach
+    (:func:`close_pairs`), vertices against triangles, then edges against edges. Returns
     the number of pairs it pushed apart."""
     triangles, thickness, edges = sc.triangles, sc.thickness, sc.tree.leaf_edge
     if triangles.shape[0] == 0:
@@ -914,7 +947,8 @@ def self_contacts(sc, inv_mass, p, x0, fit):
     largest = moves.max()  # there are triangles, so vertices
     reach = pair_reach(largest, largest, thickness)
     refit(sc.tree, triangles, p, fit)
-    vt, ee = contact_pairs(sc, p, fit, reach)
+    grow_by_moves(sc.tree, moves, fit.box, fit.dop)
+    vt, ee = contact_pairs(sc, p, fit, thickness, reach)
     pushed = 0
     for q in range(vt.shape[0]):
         f = vt[q, 1]
@@ -1130,7 +1164,7 @@ def _threaded_crossing_count(sc, p, fit):
     tasks, n = descend(
         sc.tree, bounds, _NEVER_FLAT, 0.0, _NO_BRIDGE, _ROOT, _ROOT, limit, fit.stack
     )
-    return _task_search(sc, p, fit, tasks, n, 0.0, _CROSSINGS)[2]
+    return _task_search(sc, p, fit, tasks, n, 0.0, 0.0, _CROSSINGS)[2]
 
 
 @njit(cache=True)
