@@ -3,10 +3,12 @@
 The flag runs with ``cloth.self_collision=true`` for ``--warmup`` frames, then
 ``--frames`` frames that count the passes (``TreeFit.passes``: the frame's last substep,
 every substep that moved far enough, and a second pass after one that pushed a pair).
-On the last frame's positions each phase of one pass (at the base reach, REACH
-thicknesses) is timed alone, the median of ``--repeats`` calls: the refit of the patch
-bounds and cones, the leaf-pair search (``leaf_pairs``), the close-pair search
-(``close_pairs``: vertex-triangle, then edge-edge) and the whole pass
+Over one substep's share of the last frame's motion (the last pass at the frame's start,
+the positions 1 / substeps of the way to its end) each phase of one pass is timed alone,
+the median of ``--repeats`` calls: the refit of the patch bounds and cones with their
+growth by the vertices' moves (``ms_refit``: ``refit`` and ``grow_by_moves``), the
+leaf-pair search at the thickness (``leaf_pairs``), the close-pair search at the pass's
+largest pair reach (``close_pairs``: vertex-triangle, then edge-edge) and the whole pass
 (``self_contacts``, on a copy), with the counts each one hands on. A leaf pair whose two
 patches' triangles keep their normals within the contact cone (60 degrees) of their mean
 is counted as ``flat_leaf_pairs``: how many of the tested pairs are neighbours on a gently
@@ -90,25 +92,32 @@ def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
     sc, fit = solver.tables.self_contact, solver.workspace.fit
     passes, frame_s = [], []
     for n in range(warmup, warmup + frames):
+        anchor = np.ascontiguousarray(sim.state.positions).copy()
         start = time.perf_counter()
         sim.step(n)
         frame_s.append(time.perf_counter() - start)
         passes.append(int(fit.passes[0]))
-    x = np.ascontiguousarray(sim.state.positions)
-    reach = sc_kernels.pair_reach(0.0, 0.0, sc.thickness)  # nothing moved: the base reach
-    tri, tree = sc.triangles, sc.tree
-    ms_refit, _ = median_ms(sc_kernels.refit, tree, tri, x, fit, repeats=repeats)
+    x = anchor + (sim.state.positions - anchor) / solver.settings.substeps
+    moves = sc_kernels.vertex_moves(x, anchor, np.empty(x.shape[0]))
+    reach = sc_kernels.pair_reach(moves.max(), moves.max(), sc.thickness)
+    tri, tree, gap = sc.triangles, sc.tree, sc.thickness
+
+    def bounds():
+        sc_kernels.refit(tree, tri, x, fit)
+        sc_kernels.grow_by_moves(tree, moves, fit.box, fit.dop)
+
+    ms_refit, _ = median_ms(bounds, repeats=repeats)
     cos = sc_kernels._COS_CONTACT
     ms_pairs, (pairs, found) = median_ms(
-        sc_kernels.leaf_pairs, tree, fit, cos, reach, True, repeats=repeats
+        sc_kernels.leaf_pairs, tree, fit, cos, gap, True, repeats=repeats
     )
     ms_close, (vt, ee) = median_ms(
         sc_kernels.close_pairs, sc, x, fit.box, pairs, found, reach, repeats=repeats
     )
-    bridged = sc_kernels.leaf_pairs(tree, fit, cos, reach, False)[1] - found
+    bridged = sc_kernels.leaf_pairs(tree, fit, cos, gap, False)[1] - found
     inv_mass = solver.tables.constraints.inv_mass
     ms_pass, pushed = median_ms(
-        lambda: sc_kernels.self_contacts(sc, inv_mass, x.copy(), x, fit), repeats=repeats
+        lambda: sc_kernels.self_contacts(sc, inv_mass, x.copy(), anchor, fit), repeats=repeats
     )
     return {
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
