@@ -11,8 +11,8 @@ lay on at the last pass (sign s of its distance to the triangle's plane then):
     dx_i = -C w_i s n / den,   dx_k = C beta_k w_k s n / den,
 
 skipped for a triangle turned over since (normal reversed: its sides swapped). The search
-finds every pair within d_1 + d_2 + thickness, d_1 and d_2 the largest moves since the
-last pass of the vertex and of the triangle's corners: a crossing since then lies within
+finds every pair within d_1 + d_2 + thickness of each other, d_1 and d_2 the largest moves
+since the last pass of the vertex and of the triangle's corners: a crossing since then lies within
 d_1 + d_2 of the plane. A pair found is judged within max(REACH thickness, d_1 + d_2 +
 thickness) (:func:`pair_reach`): that also brings back a vertex that a push earlier in the
 pass carried behind a triangle, and a pair that moved little is not pushed far because
@@ -381,9 +381,10 @@ def grow_by_moves(tree, moves, box, dop):
     last pass: each leaf's box by the largest ``moves`` M_k of its corners, its diagonal
     bounds by sqrt(2) M_k (a move d changes x + y by at most sqrt(2) d), the inner nodes
     the union of their children's. Two patches whose grown bounds come within the
-    thickness then hold every vertex-triangle and edge pair within its
-    :func:`pair_reach`, at most thickness + M_a + M_b: the search of the contacts
-    (:func:`self_contacts`) reaches far only where the cloth moved fast."""
+    thickness then hold every vertex-triangle and edge pair that lies within thickness +
+    d_1 + d_2 (d the largest move of each part's vertices; at most thickness + M_a + M_b):
+    every pair that touches or crossed since the last pass (module docstring). The search
+    of the contacts (:func:`self_contacts`) reaches far only where the cloth moved fast."""
     left, right, ptr, corners = tree.left, tree.right, tree.corner_ptr, tree.leaf_corner
     for k in range(left.shape[0] - 1, -1, -1):
         if left[k] >= 0:
@@ -614,9 +615,10 @@ def _task_search(sc, p, fit, tasks, n, gap, reach, crossings):
     model's threads, thread w of T taking tasks w, w + T, w + 2 T, ... with its own stack:
     with ``crossings``, the intersecting triangle pairs of
     :func:`_threaded_crossing_count` (boxes alone, gap 0), summed; else the close pairs
-    within ``reach`` of :func:`contact_pairs`, joined in the task order. Dealt out so, neighbouring tasks, which cost alike (a fold is one patch of
-    the cloth), go to different threads: in contiguous halves the first held 82 % of a
-    flapping 64 x 64 flag's leaf pairs."""
+    within ``reach`` of :func:`contact_pairs`, joined in the task order. Dealt out so,
+    neighbouring tasks, which cost alike (a fold is one patch of the cloth), go to
+    different threads: in contiguous halves the first held 82 % of a flapping 64 x 64
+    flag's leaf pairs."""
     vt_parts, ee_parts = List(), List()
     for _ in range(n):
         vt_parts.append(np.empty((0, 2), np.int64))
