@@ -10,7 +10,10 @@
   flow (the scene's automatic spin-up, two flow-through times, then 4 s recorded) at dt
   1/60 and 0.01 (``--dts``), ``paper`` and ``projection`` coupling and ``none`` (one-way:
   the §3 law in the wake the wall alone makes): whether it completes, each flag's mean |F|
-  over the recorded steps and the sheltered-to-exposed force ratio.
+  over the recorded steps, the sheltered-to-exposed force ratio, and each flag's mean
+  force along the wind (``*_force_x``, N: negative where the flag is drawn upstream, as
+  the sheltered flag is toward the wall by the reversed flow and low pressure of the
+  wall's near wake).
 
     PYTHONPATH=$PWD python experiments/projection_coupling.py [--flags-only] [--out F]
         [--resolutions 32 64] [--dts 0.016666666666666666 0.01] [key=value ...]
@@ -111,8 +114,10 @@ def flags(coupling: str, dt: float, resolution: int, extra: list[str]) -> dict:
             sim.step(n)
     except SimulationDiverged:
         status = "diverged"
-    force = np.linalg.norm(np.asarray(sim.recorder.rows["aero_force"]), axis=-1)
+    vectors = np.asarray(sim.recorder.rows["aero_force"])  # (steps, flags, 3)
+    force = np.linalg.norm(vectors, axis=-1)
     late = force.mean(axis=0)  # the recorded steps: after the spin-up
+    along = vectors[..., 0].mean(axis=0)
     blocks = [b.mean(axis=0) for b in np.array_split(force, BLOCKS)]
     ratios = np.array([b[1] / b[0] for b in blocks])
     return {
@@ -125,6 +130,8 @@ def flags(coupling: str, dt: float, resolution: int, extra: list[str]) -> dict:
         "sheltered_force": late[1],
         "force_ratio": late[1] / late[0],
         "force_ratio_sem": float(ratios.std(ddof=1) / np.sqrt(BLOCKS)),
+        "exposed_force_x": along[0],
+        "sheltered_force_x": along[1],
         "overrides": " ".join(extra),
     }
 
