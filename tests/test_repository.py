@@ -1,7 +1,9 @@
 """The code reads like its paper: no function in windbench/ over 80 lines or with more than
 12 parameters, no module docstring over 40 lines (what and why, with the equations; the
-measurements live in experiments/), and no development history in the tree (issue
-numbers, numbered work periods: that is what git history is for)."""
+measurements live in experiments/), no timing figures in windbench's docstrings and
+comments (speed-ups, "x against y ms": they live in experiments/results/, where they are
+dated and remeasured), and no development history in the tree (issue numbers, numbered
+work periods: that is what git history is for)."""
 
 from __future__ import annotations
 
@@ -22,6 +24,12 @@ HISTORY = re.compile(
     re.IGNORECASE,
 )
 HISTORY_TREES = ("windbench", "conf", "experiments", "tests")
+TIMING = re.compile(
+    r"\bagainst\s+\d+(?:\.\d+)?\s*(?:ms|µs|s)\b"  # 0.19 against 0.06 ms
+    r"|\d\s*(?:%|times)\s+(?:as\s+(?:fast|slow|costly)|faster|slower)"  # 30% faster
+    r"|\d(?:\.\d+)?\s*(?:ms|µs)\s+(?:per|a)\s+(?:step|iteration|call|frame)\b",  # 2 ms per step
+    re.IGNORECASE,
+)
 
 
 def _sources() -> list[Path]:
@@ -48,7 +56,8 @@ def _shape_faults(path: Path) -> list[str]:
     return faults
 
 
-def _history_faults(path: Path) -> list[str]:
+def _pattern_faults(path: Path, pattern: re.Pattern) -> list[str]:
+    """Each match of ``pattern`` in a text file, with its line number."""
     try:
         text = path.read_text()
     except UnicodeDecodeError:  # data files (netCDF, images)
@@ -56,7 +65,7 @@ def _history_faults(path: Path) -> list[str]:
     return [
         f"line {n}: {m.group(0)!r}"
         for n, line in enumerate(text.splitlines(), 1)
-        for m in HISTORY.finditer(line)
+        for m in pattern.finditer(line)
     ]
 
 
@@ -82,6 +91,19 @@ def test_no_development_history_in_the_tree():
     faults = {
         _relative(p): f
         for p in _tree_files()
-        if p != Path(__file__).resolve() and (f := _history_faults(p))
+        if p != Path(__file__).resolve() and (f := _pattern_faults(p, HISTORY))
     }
+    assert not faults, "\n".join(f"{path}: {'; '.join(f)}" for path, f in faults.items())
+
+
+def test_no_timing_figures_in_the_package():
+    caught = [
+        "(threads.py; 0.19 against 0.06 ms for the kernel)",
+        "the backtrace got 25-30% faster, bit for bit the same",
+        "a third of the time, 3 times as fast",
+        "cost about 2 ms per step at 64^3",
+    ]
+    assert all(TIMING.search(text) for text in caught)
+    assert not TIMING.search("Rayleigh damping time 1 ms, run at 60 frames per second")
+    faults = {_relative(p): f for p in _sources() if (f := _pattern_faults(p, TIMING))}
     assert not faults, "\n".join(f"{path}: {'; '.join(f)}" for path, f in faults.items())

@@ -5,8 +5,8 @@ numba compiles three common array operations with an error path that formats its
 message at run time, and the string machinery behind it is compiled once per process on
 first use: an array-to-array assignment (``a[:] = b``, ``a[i] = row``; its message
 names both shapes), ``np.cross`` and ``ndarray.transpose(axes)``. In a fresh process
-each cost 3-6 CPU seconds of compile time on first use, against 0.2 s for the loop that
-does the same (``experiments/compile_first_use.py``). Every cold process that compiles a
+each costs seconds of compile time on first use, many times the loop that does the same
+(``experiments/compile_first_use.py``). Every cold process that compiles a
 kernel paid them, so the kernels use these instead: the same numbers, since each element
 is computed by the same operations in the same order.
 """

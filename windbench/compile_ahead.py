@@ -4,7 +4,7 @@ the run compiles its wind's.
 numba compiles one function at a time in a process (its compiler holds a lock), so a run
 on an empty cache compiles its geometry, wind, aerodynamics and cloth kernels one after
 the other on one core, the second core idle: a first Navier-Stokes run of the smoke scene
-spends nearly all its time compiling, 43 of 94 s on the cloth
+spends nearly all its time compiling, nearly half of it on the cloth
 (``experiments/compile_times.py``). Here a helper process (``python -m
 windbench.compile_ahead``, one numba thread, the run's config on its standard input)
 builds the scene's cloth and steps it once in still air, with the aerodynamic forces and

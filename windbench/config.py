@@ -196,8 +196,9 @@ class ClothConfig:
         False,
         "",
         "cloth keeps its thickness from itself and from other cloths (off by default: it "
-        "makes a flapping flag's frame 1.5-1.9 times as costly; without it a folding flag "
-        "passes through itself, which the self_intersections figure counts)",
+        "adds a contact search to the substeps, its cost in experiments/results/"
+        "bench_cloth_self_collision.csv; without it a folding flag passes through itself, "
+        "which the self_intersections figure counts)",
     )
     thickness: float = setting(
         0.005, "m", "self-contact distance between a vertex and another triangle", gt=0

@@ -265,7 +265,7 @@ def _near_ones(boxes, p, prims, held, n_held):
     """Of the edges or triangles (rows of 2 or 3 corners) ``held[:n_held]``, those whose box
     meets a body's grown box (:func:`~windbench.cloth.near_bodies.box_within`). A loop of
     its own: with the contact calls in the same loop numba keeps reference counts inside
-    it, 20 times the cost of the box tests."""
+    it, which cost far more than the box tests."""
     last = prims.shape[1] - 1
     out = np.empty(n_held, np.int64)
     found = 0

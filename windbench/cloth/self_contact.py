@@ -617,7 +617,7 @@ def _task_search(sc, p, fit, tasks, n, gap, reach, crossings):
     :func:`_threaded_crossing_count` (boxes alone, gap 0), summed; else the close pairs
     within ``reach`` of :func:`contact_pairs`, joined in the task order. Dealt out so,
     neighbouring tasks, which cost alike (a fold is one patch of the cloth), go to
-    different threads: in contiguous halves the first held 82 % of a flapping 64 x 64
+    different threads: in contiguous halves one thread would hold most of a flapping
     flag's leaf pairs."""
     vt_parts, ee_parts = List(), List()
     for _ in range(n):
@@ -1344,8 +1344,8 @@ def _crossing_edges(sc, p, fit):
     The search culls by the boxes and by the normal cones at 90 degrees (Volino and
     Magnenat-Thalmann 1994: a connected patch whose normals lie within such a cone cannot
     cross itself unless its contour overlaps itself in projection, module docstring):
-    searched by boxes alone, as the figure is, it added 40 % to the frame of a flapping
-    40x25 flag, with the cones 6 % (``bench_cloth.py``)."""
+    searched by boxes alone, as the figure is, it would cost a flapping flag's frame
+    several times what it costs with the cones (``bench_cloth.py``)."""
     triangles = sc.triangles
     refit(sc.tree, triangles, p, fit)
     pairs, found = leaf_pairs(sc.tree, fit, _COS_UNTANGLE, 0.0, _NO_BRIDGE)

@@ -47,8 +47,8 @@ AXES = (np.int64(0), np.int64(1), np.int64(2))
 def _locate(f, npad):
     """Lower index (unsigned, see :func:`_trilinear`) and weight of lattice coordinate f
     on a padded axis of npad samples, clamped onto the lattice. (Written out rather than
-    calling :func:`_locate_inside`: inlined that way, fast math contracted the backtrace
-    differently, 1e-11 apart.)"""
+    calling :func:`_locate_inside`: inlined that way, fast math contracts the backtrace
+    differently and changes its last bits.)"""
     f = min(max(f, 0.0), npad - 1.0)
     i0 = min(int(f), npad - 2)
     return np.uint64(i0), f - i0
@@ -66,8 +66,7 @@ def _locate_inside(f, npad):
 def _trilinear(q, i, j, k, fx, fy, fz):
     """q trilinearly interpolated in the lattice cell (i, j, k) at weights (fx, fy, fz).
     The indices are unsigned (:func:`_locate`), so numba leaves out its wrap-around test
-    for negative indices on each read: the per-cell backtrace (three interpolations) got
-    25-30% faster, bit for bit the same. The weights are cast to q's precision, so that a
+    for negative indices on each read, the same numbers with fewer instructions. The weights are cast to q's precision, so that a
     float32 field (``wind.precision``) is interpolated in float32 rather than each of its
     eight values converted to double (float64: a no-op, the same bits)."""
     i1, j1, k1 = i + ONE, j + ONE, k + ONE

@@ -118,8 +118,8 @@ class NavierStokesConfig(WindConfig):
     pressure_max_iterations: int = 200
     pressure_guess: str = GUESSES[0]  # extrapolate | previous: the solve's start (.guess)
     # bound on the implicit solve's max error / velocity scale: 1e-7, under one float32
-    # unit (1.19e-7); 1e-8 took a second sweep at air's viscosity from 128^3 cells of the
-    # scaling scene on (float32 step 174 against 160 ms, experiments/bench_ns.py)
+    # unit (1.19e-7); one sweep at air's viscosity up to 128^3 cells of the scaling scene,
+    # where 1e-8 takes two (experiments/bench_ns.py)
     diffusion_tol: float = 1e-7
     source_relaxation: float = 10.0  # 1/s: interior primitives pull the air toward w_i
     coupling: str = "paper"  # none | paper | projection (paper §4.1.2)

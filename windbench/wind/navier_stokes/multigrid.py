@@ -59,19 +59,14 @@ PRE_SWEEPS = 2  # per level and direction
 # slab at 64^3.
 SLAB_PLANES = 8
 # Levels whose coarse-grid correction is two cycles of the next level (a W on the first
-# coarse levels, a V below): 5 / 5 / 5 MGPCG iterations to 1e-6 at 32^3 / 64^3 / 128^3 on
-# the fence against 6 / 6 / 7 with a plain V-cycle (one solve, two threads, A/B in one
-# process: 6 / 31 / 157 ms against 7 / 34 / 204 ms; over 30 steps 5.0 / 5.4 / 5.9 against
-# 5.8 / 6.3 / 7.0 iterations); (1,) alone saved no iteration at 64^3 and 128^3, (1, 2, 3)
-# no more time.
+# coarse levels, a V below): the fewest MGPCG iterations per solve for the least time on
+# the fence from 32^3 to 128^3 (each choice timed with ``experiments/bench_ns.py``); a W
+# on level 1 alone saves no iteration, a W down to level 3 costs more than it saves.
 W_LEVELS = (1, 2)
 # Over-relaxation of the smoother on the coarse levels (OMEGA) and on the finest one
 # (FINE_OMEGA), where most of the smoothing time goes and where Gauss-Seidel's loop (x_c
-# not read) is a third faster than SOR's. Over 8 steps of the fence, A/B in one process:
-# MGPCG iterations per step to 1e-6 at 32^3 / 64^3 / 128^3: 5.0 / 5.0 / 5.75 with 1.0
-# everywhere, 4.8 / 5.0 / 5.0 with 1.1 everywhere (slower per iteration), 5.0 / 5.0 / 5.12
-# with 1.1 on the coarse levels only. (With the plain V-cycle, 1.15 had saved one
-# iteration at 32^3 and 64^3 but none at 128^3.)
+# not read) is cheaper than SOR's: over-relaxing the coarse levels alone saves most of the
+# iterations that over-relaxing every level saves, without the finest level's slower loop.
 OMEGA = 1.1
 FINE_OMEGA = 1.0
 # The multigrid cycle (the preconditioner) works in single precision: it only has to
@@ -81,10 +76,12 @@ FINE_OMEGA = 1.0
 # (0, 1 and means of them times powers of 1/4).
 PRECONDITIONER_DTYPE = np.float32
 # Cells per axis of the blocks whose net residual weighs a starting guess (two coarsenings:
-# :meth:`MultigridPoisson.smooth_residual_norm`). Iterations per step with the guess of
-# :mod:`.guess` (fence of experiment=scaling, 80 steps at 64^3 and 60 at 128^3;
-# two_flags_wall at 48 cells, developed flow): 3.65 / 4.72 / 4.76 against 3.65 / 5.50 /
-# 4.79 with the cells' own residual (blocks of 1) and 3.65 / 5.12 / - with blocks of 2.
+# :meth:`MultigridPoisson.smooth_residual_norm`): the block size with the fewest iterations
+# per step after the guess of :mod:`.guess` on the fence and two_flags_wall in a developed
+# flow (blocks of 1, 2 and 4 timed with ``experiments/bench_ns.py``); a cell's own
+# residual (blocks of 1)
+# favours the guess whose error the cycle removes at once, not the one that costs the
+# iterations.
 GUESS_BLOCK = 4
 # the smoother's (r, partial) when no dot is wanted (:func:`gauss_seidel`)
 NO_DOT = (np.zeros((0, 0, 0)), np.zeros(0))
@@ -296,10 +293,10 @@ def apply_operator(x, level, out):
 @njit(cache=True, fastmath=FAST_MATH)
 def _gs_plane(x, b, level, i, colour):
     """One colour of plane i. Cells of one colour do not neighbour each other, so the
-    order within a colour does not matter: each row class in a loop of its own (with the
-    other rows' code in the same loop the ALL_OPEN rows ran twice as slow), ALL_OPEN in
-    functions of their own. The stores are written out in the loops: an inlined helper
-    that stores into an array made the loop three to four times slower (numba 0.68)."""
+    order within a colour does not matter: each row class in a loop of its own (the other
+    rows' code in the ALL_OPEN rows' loop keeps numba from optimising it), ALL_OPEN in
+    functions of their own. The stores are written out in the loops: numba does not
+    optimise a loop that calls an inlined helper storing into an array as well."""
     wx, wy, wz, periodic, rows, row_coef, ends, coef = level
     if coef[6] == 1.0:
         _constant_rows_gauss_seidel(x, b, rows, ends, coef, i, colour)
@@ -350,7 +347,7 @@ def _constant_row(x, b, i, j, colour):
 def _constant_rows_gauss_seidel(x, b, rows, ends, coef, i, colour):
     """One colour of the ALL_OPEN rows of plane i, omega = 1: x_c = (b_c + sum x_nb) / diag
     as gain b_c + gain c0 sum x_nb (coef[3], coef[4], in x's precision: float32 arithmetic
-    throughout is a third faster than converting each value to float64 and back)."""
+    throughout, rather than converting each value to float64 and back)."""
     gain, g = coef[3], coef[4]
     for j in range(x.shape[1]):
         if rows[i, j] == ALL_OPEN:
@@ -366,7 +363,7 @@ def _constant_rows_gauss_seidel(x, b, rows, ends, coef, i, colour):
 def _constant_rows_sor(x, b, rows, ends, coef, i, colour):
     """:func:`_constant_rows_gauss_seidel` with over-relaxation: x_c = (1 - omega) x_c +
     omega (b_c + sum x_nb) / diag, 1 - omega in coef[5] (a loop of its own: reading x_c
-    makes it a third slower than Gauss-Seidel's)."""
+    makes it slower than Gauss-Seidel's)."""
     gain, g, keep = coef[3], coef[4], coef[5]
     for j in range(x.shape[1]):
         if rows[i, j] == ALL_OPEN:
@@ -395,8 +392,8 @@ def _gs_row_ends(xc, bc, xm, xp, ym, yp, ends, i, j, first, omega):
 def gauss_seidel(x, b, level, colour, halves, r, partial):
     """``halves`` half sweeps of red-black SOR (the level's omega, coef[6]) on A x = b,
     alternating colours from ``colour`` (cells with (i+j+k) % 2 == colour first), planes
-    in parallel: a cycle's smoothing on one level is one call (the Python loop of one call
-    per half sweep cost about 2 ms per step at 64^3, measured with cProfile).
+    in parallel: a cycle's smoothing on one level is one call, not a Python call per half
+    sweep.
 
     On a periodic x axis with an odd number of planes the last plane neighbours the first
     one in the same colour: it is done after the parallel loop (no race, bit-reproducible).
@@ -404,7 +401,7 @@ def gauss_seidel(x, b, level, colour, halves, r, partial):
     With ``partial`` of one entry per plane (else empty): returns r . x after the last
     half sweep, each plane's share taken as soon as that sweep has finished the plane
     (no other plane writes it), summed by planes in order as :func:`dot` does: CG's r . M r
-    without a pass of its own (0.13 ms per iteration at 64^3).
+    without a pass of its own.
     """
     nx = x.shape[0]
     periodic = level[3]

@@ -1,21 +1,18 @@
 """The Navier-Stokes kernels' two compiled versions: one that splits its ``prange`` loop
 over numba's threads, one that runs it as a plain loop; and the choice between them.
 
-Threads cost twice on a small grid. numba's parallel version of a kernel takes 3-5 times
-the compile time of the serial one (its loop analysis and threaded wrapper; one process,
-empty cache: ``subtract_gradient`` 3.0 against 0.64 CPU s, ``residual`` 3.4 against 0.9),
-and waking the other threads (a passive wait, :mod:`windbench.runtime`) for each of the
-step's few hundred loops costs more than the second thread gains. A grid below
-``PARALLEL_CELLS`` cells runs the serial versions (:func:`select`), so the small runs of
-a first try, a test suite or a parallel sweep never compile the parallel ones; larger
-grids run the parallel versions on the run's threads. Measured per step, the two
-versions A/B in one process (``experiments/bench_kernel_versions.py``): on one thread
-the serial versions were 1-8 % slower (fence 16^3 to 64^3, two_flags_wall at 40 and 80
-cells); on two threads they were faster up to 32^3 (13.2 against 21.3 ms at 32^3), even
-at 48^3 and slower at 64^3 (76.6 against 59.5 ms). The serial versions are that fast
+Threads cost twice on a small grid. numba's parallel version of a kernel takes several
+times the compile time of the serial one (its loop analysis and threaded wrapper,
+``experiments/compile_times.py``), and waking the other threads (a passive wait,
+:mod:`windbench.runtime`) for each of the step's few hundred loops costs more than the
+second thread gains. A grid below ``PARALLEL_CELLS`` cells runs the serial versions
+(:func:`select`), so the small runs of a first try, a test suite or a parallel sweep never
+compile the parallel ones; larger grids run the parallel versions on the run's threads.
+The threshold is where the parallel versions overtake the serial ones on two threads
+(``experiments/bench_kernel_versions.py`` steps both in one process,
+``experiments/results/bench_kernel_versions.csv``). The serial versions are that fast
 only where their loops keep no array views or array-taking helpers in branchy code: there
-numba's reference counting stays in a plain loop (``subtract_gradient`` ran 33 times
-slower before its psi reads were written out, :func:`.projection.face_cells`).
+numba's reference counting stays in a plain loop (:func:`.projection.face_cells`).
 
 Both versions are compiled from the same source, each with its own cache entry (the
 serial one under the kernel's name with ``SERIAL_SUFFIX``), with the error model numba
