@@ -4,7 +4,7 @@ worker processes.
 Each piece is a pure function of its arguments (a file, a scene's runs), so the result is
 the same whatever the number of workers; ``map`` keeps the input order. Workers are
 started with ``spawn`` (a clean interpreter: no inherited matplotlib or thread state) and
-cost about 2 s of imports each, so small batches stay in this process: a caller says how
+cost seconds of imports each, so small batches stay in this process: a caller says how
 many of its pieces make one worker worth starting. Functions of the library default to one
 process (a script calling them needs no ``if __name__ == "__main__"`` guard, which
 ``spawn`` requires); ``windbench-report`` asks for the cores.

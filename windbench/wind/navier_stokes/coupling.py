@@ -19,16 +19,11 @@
   walls of cloth (a pocket: :func:`pockets`) keeps its volume only if their velocities add
   up to zero around it, which faceted motion does not guarantee: the projection's
   right-hand side loses its mean over each pocket (:func:`balance_pockets`), so that the
-  Poisson problem stays solvable. The paper's removal is not applied as well: it stopped
+  Poisson problem stays solvable. The paper's removal is not applied as well: it stops
   the air on every face next to a cut cell, a cell's width around the cloth, whose set
-  changes as the cloth moves, and the projection turned each change into a pressure
-  impulse on the cloth (two_flags_wall in a uniform 6 m/s at 32 cells, developed flow, dt
-  1/60 and 0.01: the sheltered flag felt 0.72 and 0.68 of the exposed flag's force with
-  both, 0.15 and 0.12 with the closed faces alone; the paper's coupling 0.02 and 0.19). In
-  the scene's log-law wind, 32 and 64 cells, the closed faces give 0.34-0.50 and 0.08-0.17
-  (0.58-0.67 and 0.18-0.37 with the loads read from the two cells beside the sheet), the
-  paper's coupling 0.03-0.04 and 0.007-0.008, one-way coupling, the §3 law in the wall's
-  own wake, 0.05 and 0.08 (``experiments/results/projection_coupling.csv``).
+  changes as the cloth moves, and the projection would turn each change into a pressure
+  impulse on the cloth. ``experiments/projection_coupling.py`` measures the couplings
+  side by side (``experiments/results/projection_coupling*.csv``).
 - ``none``: the cloth does not act on the air (one-way coupling).
 """
 
