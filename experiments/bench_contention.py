@@ -13,7 +13,9 @@ For each thread setting it builds the ``experiment=scaling`` fence (resolution^3
 beside a ``while True: pass`` process, so that a drift of the machine hits both alike.
 Writes experiments/results/bench_contention.csv: per thread setting the median step alone,
 the median step beside the busy process, their ratio, and the load average before and after
-(the busy process adds 1 to it; the idle rounds are only idle if the machine is).
+(the busy process adds 1 to it; the idle rounds are only idle if the machine is); with a
+one-thread row, ``one_core_ratio``: the one-thread step alone over the row's step alone,
+the ratio a run shows when the busy process leaves it one core of the two.
 
 ``--launchers`` runs the ``experiment=scaling`` Navier-Stokes sweep over ``--sweep``
 resolutions three times: the basic launcher (one run at a time, ``runtime.threads=auto``:
@@ -139,6 +141,14 @@ def launchers(args) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def with_one_core_ratio(table: pd.DataFrame) -> pd.DataFrame:
+    """``table`` with ``one_core_ratio`` (module docstring), when it has a one-thread row."""
+    one = table.loc[table.threads == 1, "alone_step_seconds"]
+    if not one.empty:
+        table["one_core_ratio"] = float(one.iloc[0]) / table["alone_step_seconds"]
+    return table
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--resolution", type=int, default=64)
@@ -152,7 +162,7 @@ def main():
         table, out = launchers(args), RESULTS / "bench_launchers.csv"
     else:
         rows = [measure(s if s == "auto" else int(s), args) for s in args.threads]
-        table, out = pd.DataFrame(rows), OUT
+        table, out = with_one_core_ratio(pd.DataFrame(rows)), OUT
     print(table.to_string(index=False))
     table.to_csv(out, index=False)
     print(f"wrote {out}")
