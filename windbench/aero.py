@@ -33,9 +33,9 @@ projection``) the force on a triangle is the jump of the air's pressure across i
 on it. With ``aero.subgrid_law`` the §3 law is added, on the relative velocity of the air
 at the cloth (:func:`cloth_forces`): the part of the flow that the grid does not stop.
 Where the grid resolves the cloth, the coupled air moves with it and that part is small
-(a few per cent of a static plate's drag across a channel); a cloth that lies within one layer
-of coarse cells closes few faces, the air passes through it, and the pressure jump alone
-would leave it without the wind's force. In between, the law also sees some of the air
+(a few per cent of a static plate's drag across a channel); a cloth that lies within one
+layer of coarse cells closes few faces, the air passes through it, and the pressure jump
+alone would leave it without the wind's force. In between, the law also sees some of the air
 that the closed faces already stop (``experiments/results/projection_coupling.csv``).
 """
 

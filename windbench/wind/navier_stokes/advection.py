@@ -66,9 +66,10 @@ def _locate_inside(f, npad):
 def _trilinear(q, i, j, k, fx, fy, fz):
     """q trilinearly interpolated in the lattice cell (i, j, k) at weights (fx, fy, fz).
     The indices are unsigned (:func:`_locate`), so numba leaves out its wrap-around test
-    for negative indices on each read, the same numbers with fewer instructions. The weights are cast to q's precision, so that a
-    float32 field (``wind.precision``) is interpolated in float32 rather than each of its
-    eight values converted to double (float64: a no-op, the same bits)."""
+    for negative indices on each read: the same numbers with fewer instructions. The
+    weights are cast to q's precision, so that a float32 field (``wind.precision``) is
+    interpolated in float32 rather than each of its eight values converted to double
+    (float64: a no-op, the same bits)."""
     i1, j1, k1 = i + ONE, j + ONE, k + ONE
     in_precision = q.dtype.type
     fx, fy, fz = in_precision(fx), in_precision(fy), in_precision(fz)

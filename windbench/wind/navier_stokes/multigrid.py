@@ -65,8 +65,9 @@ SLAB_PLANES = 8
 W_LEVELS = (1, 2)
 # Over-relaxation of the smoother on the coarse levels (OMEGA) and on the finest one
 # (FINE_OMEGA), where most of the smoothing time goes and where Gauss-Seidel's loop (x_c
-# not read) is cheaper than SOR's: over-relaxing the coarse levels alone saves most of the
-# iterations that over-relaxing every level saves, without the finest level's slower loop.
+# not read) is cheaper than SOR's: over-relaxing the coarse levels alone saves nearly as
+# many iterations at 128^3 as over-relaxing every level, without the finest level's
+# slower loop.
 OMEGA = 1.1
 FINE_OMEGA = 1.0
 # The multigrid cycle (the preconditioner) works in single precision: it only has to
@@ -79,9 +80,8 @@ PRECONDITIONER_DTYPE = np.float32
 # :meth:`MultigridPoisson.smooth_residual_norm`): the block size with the fewest iterations
 # per step after the guess of :mod:`.guess` on the fence and two_flags_wall in a developed
 # flow (blocks of 1, 2 and 4 timed with ``experiments/bench_ns.py``); a cell's own
-# residual (blocks of 1)
-# favours the guess whose error the cycle removes at once, not the one that costs the
-# iterations.
+# residual (blocks of 1) favours the guess whose error the cycle removes at once, not the
+# one that costs the iterations.
 GUESS_BLOCK = 4
 # the smoother's (r, partial) when no dot is wanted (:func:`gauss_seidel`)
 NO_DOT = (np.zeros((0, 0, 0)), np.zeros(0))
