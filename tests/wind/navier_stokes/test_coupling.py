@@ -210,9 +210,10 @@ def test_a_flag_coupled_through_pressure_on_a_coarse_grid_flies(tmp_path):
     and close few faces), 2 s of spin-up, then 1.5 s: with the §3 law on the air that passes
     through the cloth (``aero.subgrid_law``, the default) the exposed flag streams from
     its pole, its free end on average beyond 80 % of its length downstream (pole at x = 3 m),
-    and feels at least half the force of the paper's coupling. With the pressure jump alone
-    the flag hung by its pole (its free end at 3.2 m) and, after 8 s of spin-up, felt 0.4
-    N against the paper coupling's 3.5 N."""
+    and feels at least half the force of the paper's coupling. The pressure jump alone
+    (``aero.subgrid_law=false``) leaves it hanging by its pole: 0.39 N against the paper
+    coupling's 3.56 N in a developed flow at dt 1/60
+    (``experiments/results/projection_coupling_jump_only.csv``)."""
     steps = ("sim.spinup=2", "sim.duration=1.5", f"sim.dt={1 / 60}")
     force, names, reach = _flags_run(tmp_path, "projection", 32, *steps)
     late = force.shape[0] // 2
@@ -225,10 +226,10 @@ def test_a_flag_coupled_through_pressure_on_a_coarse_grid_flies(tmp_path):
 def test_the_sheltered_flag_coupled_through_pressure_feels_the_walls_lee(tmp_path):
     """two_flags_wall at 32 cells in a uniform 6 m/s, 3 s from rest: behind the wall,
     which stands twice as high as the flag, the sheltered flag feels under a third of the
-    force on the exposed one over the last 1.5 s (the paper's coupling: 0.03). With the
-    paper's removal of the normal velocity in the cut cells applied as well as the closed
-    faces, the removal's changing set of cells made the pressure loads noisy and the ratio
-    was 0.77. In the scene's own log-law wind, developed flow, the ratio is 0.10-0.12 at
+    force on the exposed one over the last 1.5 s (the paper's coupling: 0.03). The paper's
+    removal of the normal velocity in the cut cells is not applied as well: its changing
+    set of cells would make the pressure loads noisy (:mod:`windbench.wind.navier_stokes.
+    coupling`). In the scene's own log-law wind, developed flow, the ratio is 0.10-0.12 at
     32 and at 64 cells against 0.05 and 0.08-0.095 with one-way coupling and 0.012-0.045
     with the paper's (``experiments/results/projection_coupling.csv``)."""
     uniform = "scene.sources=[{type: uniform, velocity: [6.0, 0.0, 0.0]}]"
