@@ -11,11 +11,14 @@ waits for its slowest thread). This benchmark measures how much a step slows:
 For each thread setting it builds the ``experiment=scaling`` fence (resolution^3 cells,
 ``navier_stokes``), then alternates rounds of ``--steps`` steps alone and ``--steps`` steps
 beside a ``while True: pass`` process, so that a drift of the machine hits both alike.
-Writes experiments/results/bench_contention.csv: per thread setting the median step alone,
-the median step beside the busy process, their ratio, and the load average before and after
-(the busy process adds 1 to it; the idle rounds are only idle if the machine is); with a
-one-thread row, ``one_core_ratio``: the one-thread step alone over the row's step alone,
-the ratio a run shows when the busy process leaves it one core of the two.
+Each step runs on the threads a run's :class:`windbench.runtime.ThreadBudget` gives it:
+under ``auto`` fewer while the busy process holds a core. Writes
+experiments/results/bench_contention.csv: per thread setting the median step alone, the
+median step beside the busy process, their ratio, the median thread count of each, and the
+load average before and after (the busy process adds 1 to it; the idle rounds are only
+idle if the machine is); with a one-thread row, ``one_core_ratio``: the one-thread step
+alone over the row's step alone, the ratio a run shows when it leaves the busy process's
+core to it.
 
 ``--launchers`` runs the ``experiment=scaling`` Navier-Stokes sweep over ``--sweep``
 resolutions three times: the basic launcher (one run at a time, ``runtime.threads=auto``:
@@ -37,7 +40,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.bench_ns import Variant
-from windbench.runtime import load_average, thread_count, use_threads
+from windbench.runtime import AUTO, ThreadBudget, load_average, thread_count
 
 RESULTS = Path(__file__).parent / "results"
 OUT = RESULTS / "bench_contention.csv"
@@ -47,46 +50,52 @@ LAUNCHERS = {
     "basic_1thread": ["runtime.threads=1"],
 }
 BUSY = "while True: pass"
-SETTLE = 0.5  # s: let the scheduler place the busy process before timing
+SETTLE = 0.5  # s: let the scheduler (and the thread budget) see the busy process come or go
 
 
-def timed_steps(variant: Variant, steps: int) -> list[float]:
-    """Wall seconds of each of ``steps`` backend steps."""
+def timed_steps(variant: Variant, budget: ThreadBudget, steps: int) -> list[tuple[float, int]]:
+    """Wall seconds and thread count of each of ``steps`` backend steps."""
     variant.rows.clear()
+    threads = []
     for _ in range(steps):
+        threads.append(budget.update())
         variant.step()
-    return [r["step"] for r in variant.rows]
+    return [(r["step"], n) for r, n in zip(variant.rows, threads, strict=True)]
 
 
-def beside_busy(variant: Variant, steps: int) -> list[float]:
+def beside_busy(variant: Variant, budget: ThreadBudget, steps: int) -> list[tuple[float, int]]:
     """As :func:`timed_steps` while one CPU-bound process runs."""
     busy = subprocess.Popen([sys.executable, "-c", BUSY])
     try:
         time.sleep(SETTLE)
-        return timed_steps(variant, steps)
+        return timed_steps(variant, budget, steps)
     finally:
         busy.kill()
         busy.wait()
+        time.sleep(SETTLE)
 
 
 def measure(setting, args) -> dict:
-    threads = use_threads(thread_count(setting))
+    budget = ThreadBudget(thread_count(setting), adaptive=setting == AUTO)
     variant = Variant(args.resolution, "float64", "semi_lagrangian", None)
     load0 = load_average()[0]
     alone, busy = [], []
     for _ in range(args.rounds):
-        alone += timed_steps(variant, args.steps)
-        busy += beside_busy(variant, args.steps)
-    a, b = float(np.median(alone)), float(np.median(busy))
+        alone += timed_steps(variant, budget, args.steps)
+        busy += beside_busy(variant, budget, args.steps)
+    (a, a_threads), (b, b_threads) = (np.median(np.array(x), axis=0) for x in (alone, busy))
+    budget.restore()
     return {
         "resolution": args.resolution,
         "runtime_threads": str(setting),
-        "threads": threads,
+        "threads": budget.planned,
         "steps_per_round": args.steps,
         "rounds": args.rounds,
         "alone_step_seconds": a,
         "busy_step_seconds": b,
         "ratio": b / a,
+        "alone_threads": a_threads,
+        "busy_threads": b_threads,
         "load_before": load0,
         "load_after": load_average()[0],
     }
@@ -161,7 +170,7 @@ def main():
     if args.launchers:
         table, out = launchers(args), RESULTS / "bench_launchers.csv"
     else:
-        rows = [measure(s if s == "auto" else int(s), args) for s in args.threads]
+        rows = [measure(s if s == AUTO else int(s), args) for s in args.threads]
         table, out = with_one_core_ratio(pd.DataFrame(rows)), OUT
     print(table.to_string(index=False))
     table.to_csv(out, index=False)

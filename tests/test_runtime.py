@@ -5,6 +5,7 @@ import logging
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numba
@@ -35,11 +36,113 @@ def test_a_bad_thread_count_is_refused_with_its_key(bad):
         runtime.thread_count(bad)
 
 
+STAT = """cpu  60 0 40 900 0 0 0 0 0 0
+cpu0 10 2 20 400 7 1 2 3 5 0
+cpu1 50 0 20 500 0 0 0 0 0 0
+intr 12345 0 0
+"""
+
+
+def test_busy_time_of_a_cpu_set_is_read_from_proc_stat():
+    """user + nice + system + irq + softirq + steal ticks (idle, iowait, guest left out)."""
+    assert runtime.busy_seconds(STAT, [0], 0.01) == pytest.approx(0.38)
+    assert runtime.busy_seconds(STAT, [0, 1], 0.01) == pytest.approx(1.08)
+    assert runtime.busy_seconds(STAT, [7], 0.01) == 0.0
+
+
+class FakeMachine:
+    """Two cores whose busy ticks, this process's CPU time and the wall clock advance
+    as the test says."""
+
+    def __init__(self):
+        self.ticks, self.own, self.wall = [0, 0], 0.0, 0.0
+
+    def advance(self, seconds: float, elsewhere: float, own: float):
+        """``seconds`` of wall time with ``elsewhere`` and ``own`` cores busy."""
+        tick = 1.0 / os.sysconf("SC_CLK_TCK")
+        total = round((elsewhere + own) * seconds / tick)
+        self.ticks = [self.ticks[0] + total // 2, self.ticks[1] + total - total // 2]
+        self.own += own * seconds
+        self.wall += seconds
+
+    def stat(self) -> str:
+        return "".join(f"cpu{i} {t} 0 0 0 0 0 0 0 0 0\n" for i, t in enumerate(self.ticks))
+
+    def watch(self) -> runtime.BusyElsewhere:
+        return runtime.BusyElsewhere([0, 1], self.stat, lambda: self.wall, lambda: self.own)
+
+
+def test_cores_busy_elsewhere_are_the_busy_time_less_this_process_own():
+    machine = FakeMachine()
+    watch = machine.watch()
+    machine.advance(2.0, elsewhere=1.0, own=0.5)
+    assert watch.reading() == pytest.approx(1.0)
+    machine.advance(1.0, elsewhere=0.0, own=2.0)
+    assert watch.reading() == pytest.approx(0.0)
+    assert watch.reading() is None  # no wall time has passed
+
+
+def test_without_proc_stat_nothing_is_said():
+    def missing():
+        raise OSError("no /proc/stat")
+
+    assert runtime.BusyElsewhere([0, 1], missing).reading() is None
+
+
+@pytest.mark.parametrize(
+    ("planned", "cores", "elsewhere", "threads"),
+    [(2, 2, 0.0, 2), (2, 2, 0.4, 2), (2, 2, 0.67, 1), (2, 2, 1.0, 1), (2, 2, 2.5, 1),
+     (1, 2, 0.0, 1), (4, 16, 12.0, 4), (4, 16, 13.0, 3)],
+)  # fmt: skip
+def test_a_run_leaves_the_cores_other_processes_keep_busy(planned, cores, elsewhere, threads):
+    """16 cores, four runs of four threads: the three others' twelve cores leave four."""
+    assert runtime.threads_beside(planned, cores, elsewhere) == threads
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs a pool of 2 threads")
+def test_the_budget_follows_the_load_every_recheck_and_restores_its_plan():
+    machine = FakeMachine()
+    budget = runtime.ThreadBudget(
+        2, adaptive=True, watch=machine.watch(), clock=lambda: machine.wall
+    )
+    try:
+        machine.advance(runtime.RECHECK / 2, elsewhere=1.0, own=1.0)
+        assert budget.update() == 2  # not read yet: RECHECK has not passed
+        machine.advance(runtime.RECHECK, elsewhere=1.0, own=1.0)
+        assert budget.update() == 1 and numba.get_num_threads() == 1
+        machine.advance(runtime.RECHECK, elsewhere=0.0, own=1.0)
+        assert budget.update() == 2 and numba.get_num_threads() == 2
+        machine.advance(runtime.RECHECK, elsewhere=1.0, own=1.0)
+        assert budget.update() == 1
+        assert budget.restore() == 2 and numba.get_num_threads() == 2
+        fixed = runtime.ThreadBudget(2, adaptive=False, watch=machine.watch())
+        machine.advance(10 * runtime.RECHECK, elsewhere=2.0, own=0.0)
+        assert fixed.update() == 2
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+
+
+@pytest.mark.skipif(not Path("/proc/stat").exists(), reason="reads /proc/stat (Linux)")
+def test_a_busy_process_is_seen_on_the_machine():
+    """A ``while True`` process holds a core: at least half a core busy elsewhere, whatever
+    else the machine runs (more load only adds)."""
+    watch = runtime.BusyElsewhere()
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        watch.reading()  # from here on, with the busy process
+        time.sleep(0.5)
+        assert watch.reading() >= 0.5
+    finally:
+        busy.kill()
+        busy.wait()
+
+
 def test_a_run_uses_its_thread_budget_and_records_cpu_time_and_load(run_config):
     _, ds = run_config(
         ["scene=empty", "grid.resolution=8", "sim.duration=0.05", "runtime.threads=1"]
     )
     assert ds.attrs["numba_threads"] == 1
+    assert (ds["step_threads"] == 1).all() and ds["step_threads"].dims == ("time",)
     assert ds.attrs["cores_available"] >= 1
     for when in ("start", "end"):
         assert len(ds.attrs[f"load_average_{when}"]) == 3

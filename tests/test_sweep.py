@@ -14,6 +14,7 @@ import xarray as xr
 import yaml
 
 from windbench.cli import compose_config
+from windbench.dataset import MACHINE_VARIABLES
 from windbench.errors import ConfigError
 from windbench.simulate import prepare
 
@@ -199,12 +200,9 @@ def test_wrong_type_fails_at_composition(cli):
     assert proc.returncode != 0 and "grid.resolution" in proc.stderr
 
 
-TIMING = ("step_seconds",)
-
-
 def assert_same_numbers(a: xr.Dataset, b: xr.Dataset):
     for name in a.data_vars:
-        if name in TIMING or "per_second" in name or name.endswith("_seconds"):
+        if name in MACHINE_VARIABLES or "per_second" in name or name.endswith("_seconds"):
             continue
         np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
     assert a.attrs.keys() == b.attrs.keys()

@@ -262,7 +262,8 @@ class RuntimeConfig:
     threads: Any = setting(
         "auto",
         "1",
-        "numba threads of the run; auto: the cores available / the launcher's parallel runs",
+        "numba threads of the run; auto: the cores available / the launcher's parallel runs, "
+        "less the cores other processes keep busy (re-read as the run goes)",
     )
     compile_ahead: bool = setting(
         True,

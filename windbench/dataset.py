@@ -67,6 +67,11 @@ VARIABLES: dict[str, tuple[str, str | None]] = {
     "lee_force_ratio": ("|F| on the sheltered cloth / |F| on the exposed cloth", "1"),
     "step_seconds": ("wall time per step and phase", "s"),
     "step_cpu_seconds": ("CPU time of the process per step (all its threads)", "s"),
+    "step_threads": (
+        "numba threads of the step's parallel kernels (fewer than numba_threads: cores were "
+        "busy with other processes)",
+        "1",
+    ),
     "probe_wind": ("wind at the probe lattice points", "m s-1"),
     "probe_wind_mean": ("wind at the probe lattice points, mean over the steady window", "m s-1"),
     "probe_wind_block_mean": (
@@ -77,6 +82,9 @@ VARIABLES: dict[str, tuple[str, str | None]] = {
     "cloth_triangles": ("cloth triangle vertex ids", "1"),
     "vertex_cloth": ("index of the cloth each vertex belongs to", "1"),
 }
+# how the machine ran the steps (its speed, its load), not the run's numbers: the only
+# variables in which two runs of one config and seed may differ
+MACHINE_VARIABLES = ("step_seconds", "step_cpu_seconds", "step_threads")
 AXES = {"x": "X", "y": "Y", "z": "Z"}
 PHASES = ("wind", "aero", "cloth", "total")  # step_seconds columns the loop records
 PACKAGES = ("numpy", "scipy", "numba", "xarray", "netCDF4", "pandas", "hydra-core")

@@ -4,8 +4,10 @@ Thread budget (``runtime.threads``): a run's parallel kernels use ``auto`` = the
 this process may run on divided by the runs a launcher has in flight at once (at least
 one), or the number given. A parallel sweep of two runs on two cores then gives each run
 one core instead of two threads each that take turns on both. Set with
-``numba.set_num_threads`` before the run's first kernel; the dataset records it. (A
-Navier-Stokes grid below ``threads.PARALLEL_CELLS`` cells runs serial kernels whatever
+``numba.set_num_threads`` before the run's first kernel; the dataset records it. Under
+``auto`` the run also gives up a thread for each of its cores that other processes keep
+busy, re-read as it runs (:class:`ThreadBudget`); the dataset records each step's count.
+(A Navier-Stokes grid below ``threads.PARALLEL_CELLS`` cells runs serial kernels whatever
 the count: :mod:`windbench.wind.navier_stokes.threads`.)
 
 Honest timing: each step records its process CPU time beside its wall time, and the
@@ -22,21 +24,29 @@ import logging
 import math
 import os
 import time
+from pathlib import Path
 
 from windbench.errors import ConfigError
 
 log = logging.getLogger("windbench")
 AUTO = "auto"
+RECHECK = 0.25  # s between two readings of the cores that other processes keep busy
+PROC_STAT = Path("/proc/stat")  # Linux: CPU time of each core since boot, in clock ticks
 PROGRESS_EVERY = 0.1  # of a run's steps between two progress lines in a log
 PROGRESS_QUIET = 2.0  # s: no line sooner than this after the previous one (short runs)
 
 
-def available_cores() -> int:
-    """Cores this process may run on (its CPU affinity, else the machine's count)."""
+def cpu_set() -> list[int]:
+    """The CPU numbers this process may run on (its affinity, else all the machine's)."""
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        return sorted(os.sched_getaffinity(0)) or [0]
     except (AttributeError, OSError):  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
+        return list(range(max(1, os.cpu_count() or 1)))
+
+
+def available_cores() -> int:
+    """Cores this process may run on (:func:`cpu_set`)."""
+    return len(cpu_set())
 
 
 def thread_pool_size() -> int:
@@ -69,6 +79,102 @@ def use_threads(count: int) -> int:
 
     numba.set_num_threads(int(count))
     return int(numba.get_num_threads())
+
+
+def busy_seconds(stat_text: str, cores, tick: float) -> float:
+    """CPU seconds the ``cores`` (CPU numbers) have spent busy since boot, from the text of
+    /proc/stat: user, nice, system, irq, softirq and steal ticks of each ``cpuN`` line
+    (guest time is inside user) times ``tick`` seconds."""
+    wanted = {f"cpu{c}" for c in cores}
+    ticks = 0
+    for line in stat_text.splitlines():
+        fields = line.split()
+        if fields and fields[0] in wanted:
+            user, nice, system, _idle, _iowait, irq, softirq, steal = map(int, fields[1:9])
+            ticks += user + nice + system + irq + softirq + steal
+    return ticks * tick
+
+
+class BusyElsewhere:
+    """How many of this process's cores other processes kept busy between two readings:
+    (busy seconds of those cores - this process's CPU seconds) / wall seconds, from
+    /proc/stat; None where the system does not say (not Linux).
+
+    ``read()`` gives /proc/stat's text, ``clock`` wall time and ``cpu_clock`` the process's
+    CPU time (all its threads; a child process counts as another process)."""
+
+    def __init__(self, cores=None, read=None, clock=time.monotonic, cpu_clock=time.process_time):
+        self.cores = cpu_set() if cores is None else list(cores)
+        self.read = read or PROC_STAT.read_text
+        self.clock, self.cpu_clock = clock, cpu_clock
+        self.tick = 1.0 / os.sysconf("SC_CLK_TCK")
+        self.last = self._sample()
+
+    def _sample(self) -> tuple[float, float, float] | None:
+        try:
+            busy = busy_seconds(self.read(), self.cores, self.tick)
+        except (OSError, ValueError):  # no /proc/stat, or one this parser does not know
+            return None
+        return self.clock(), busy, self.cpu_clock()
+
+    def reading(self) -> float | None:
+        """Cores busy elsewhere since the last reading (>= 0), or None."""
+        now, last = self._sample(), self.last
+        self.last = now
+        if now is None or last is None or now[0] <= last[0]:
+            return None
+        elsewhere = (now[1] - last[1]) - (now[2] - last[2])
+        return max(0.0, elsewhere / (now[0] - last[0]))
+
+
+def threads_beside(planned: int, cores: int, busy_elsewhere: float) -> int:
+    """The threads a run plans for, fewer where other processes keep cores busy:
+    min(planned, max(1, cores - round(busy_elsewhere)))."""
+    return max(1, min(int(planned), int(cores) - round(busy_elsewhere)))
+
+
+class ThreadBudget:
+    """The numba threads of a run's parallel kernels, step by step.
+
+    ``planned`` threads (:func:`thread_count`); when ``adaptive`` (``runtime.threads=auto``)
+    at most one per core that other processes leave free (:func:`threads_beside`),
+    re-read every RECHECK s by :meth:`update`. A kernel's parallel loop is split evenly
+    among its threads and ends when the last one does, so a thread that shares its core
+    with a busy process holds every loop back; one thread on a free core is then the
+    faster choice (``experiments/bench_contention.py``). Kernels sum in a fixed order, so
+    the count changes timings only, never results."""
+
+    def __init__(self, planned: int, adaptive: bool = False, watch=None, clock=time.monotonic):
+        self.planned = int(planned)
+        self.current = use_threads(self.planned)
+        self.watch = (watch or BusyElsewhere()) if adaptive else None
+        self.clock = clock
+        self.checked = clock()
+
+    @classmethod
+    def as_set(cls) -> ThreadBudget:
+        """A fixed budget of the threads numba runs with now."""
+        import numba
+
+        return cls(numba.get_num_threads())
+
+    def update(self) -> int:
+        """The thread count for the next step (set in numba when it changes)."""
+        if self.watch is None or self.clock() - self.checked < RECHECK:
+            return self.current
+        self.checked = self.clock()
+        elsewhere = self.watch.reading()
+        if elsewhere is not None:
+            wanted = threads_beside(self.planned, len(self.watch.cores), elsewhere)
+            if wanted != self.current:
+                log.debug("%.2f cores busy elsewhere: %d threads", elsewhere, wanted)
+                self.current = use_threads(wanted)
+        return self.current
+
+    def restore(self) -> int:
+        """Back to the planned count (what the dataset records as the run's threads)."""
+        self.current = use_threads(self.planned)
+        return self.current
 
 
 def load_average() -> list[float]:

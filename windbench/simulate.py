@@ -480,9 +480,15 @@ class Recorder:
 class Simulation:
     """Owns the loop: wind, aerodynamics, cloth, figures, NaN checks."""
 
-    def __init__(self, setup: RunSetup, recorder: Recorder | None = None):
+    def __init__(
+        self,
+        setup: RunSetup,
+        recorder: Recorder | None = None,
+        budget: runtime.ThreadBudget | None = None,
+    ):
         self.setup = setup
         self.recorder = recorder or Recorder(setup)
+        self.budget = budget or runtime.ThreadBudget.as_set()  # numba threads per step
         self.wind = make_wind(setup.cfg.wind, setup.scene, setup.grid)
         self.cloth_solver = make_cloth_solver(setup.cfg.cloth, setup.cloth, setup.scene.bodies)
         self.state: ClothState = setup.cloth.initial_state()
@@ -503,6 +509,7 @@ class Simulation:
         s = self.setup
         if s.cfg.sim.fail_at_step is not None and n + 1 >= s.cfg.sim.fail_at_step:
             raise SimulationDiverged(n + 1, "fault injected by sim.fail_at_step (testing)")
+        self.budget.update()
         c0, t0 = time.process_time(), time.perf_counter()
         self.wind.step(s.dt, self.obstacles())
         t1 = time.perf_counter()
@@ -532,6 +539,7 @@ class Simulation:
         rec.times.append((n + 1) * s.dt)
         rec.add("step_seconds", seconds)
         rec.add("step_cpu_seconds", cpu_seconds)
+        rec.add("step_threads", self.budget.current)
         forces = s.cloth.per_cloth_sum(tri_f)
         rec.add("aero_force", forces)
         rec.add("cloth_position", self.state.positions.copy())
@@ -618,33 +626,41 @@ def run(cfg: DictConfig, out_dir: Path, jobs: int = 1) -> RunResult:
 
     A ConfigError is raised before anything is written. The run's kernels use
     ``runtime.threads`` threads, ``auto`` sharing the cores with the ``jobs`` runs a
-    launcher has in flight (:func:`windbench.runtime.thread_count`). A blow-up or any
+    launcher has in flight (:func:`windbench.runtime.thread_count`) and leaving cores that
+    other processes keep busy (:class:`windbench.runtime.ThreadBudget`). A blow-up or any
     other exception during the loop writes what was recorded with ``status = failed`` and
     the reason.
     """
-    runtime.use_threads(runtime.thread_count(cfg.runtime.threads, jobs))  # before any kernel
-    with compile_ahead.cloth_kernels(cfg, jobs) as helper:
-        return _run(cfg, out_dir, helper)
+    budget = runtime.ThreadBudget(  # before any kernel
+        runtime.thread_count(cfg.runtime.threads, jobs),
+        adaptive=str(cfg.runtime.threads) == runtime.AUTO,
+    )
+    try:
+        with compile_ahead.cloth_kernels(cfg, jobs) as helper:
+            return _run(cfg, out_dir, helper, budget)
+    finally:
+        budget.restore()
 
 
-def _run(cfg: DictConfig, out_dir: Path, helper) -> RunResult:
-    """:func:`run` once its threads are set and the compile ``helper`` (or None) started,
-    which is stopped once the first step is done: the run's kernels are all there then."""
+def _run(cfg: DictConfig, out_dir: Path, helper, budget: runtime.ThreadBudget) -> RunResult:
+    """:func:`run` once its thread ``budget`` is set and the compile ``helper`` (or None)
+    started, which is stopped once the first step is done: the run's kernels are all there
+    then."""
     setup = prepare(cfg)
     path = Path(out_dir) / cfg.output.filename
     git_commit()  # the code as loaded now, before the loop (cached)
     recorder = Recorder(setup)
     recorder.load_average["start"] = runtime.load_average()
+    status, reason = "complete", ""
     try:
-        Simulation(setup, recorder).run(
+        Simulation(setup, recorder, budget).run(
             progress=bool(cfg.sim.progress), first_step_done=lambda: compile_ahead.stop(helper)
         )
     except Exception as err:  # noqa: BLE001 - recorded, then reported by the caller
         reason = str(err) if isinstance(err, SimulationDiverged) else f"{type(err).__name__}: {err}"
         log.error("run failed: %s", reason)
-        recorder.load_average["end"] = runtime.load_average()
-        write_atomic(run_dataset(setup, recorder, "failed", reason), path)
-        return RunResult(path, "failed", reason)
+        status = "failed"
+    budget.restore()  # the dataset's numba_threads: the run's planned count
     recorder.load_average["end"] = runtime.load_average()
-    write_atomic(run_dataset(setup, recorder, "complete"), path)
-    return RunResult(path, "complete")
+    write_atomic(run_dataset(setup, recorder, status, reason), path)
+    return RunResult(path, status, reason)

@@ -164,6 +164,14 @@ def test_a_run_that_waited_for_a_core_or_shared_a_loaded_machine_is_contended():
     assert not contention(_timed_run([1.0] * 3, [1.0] * 3, load=(2.4, 2.5)))["contended"]
 
 
+def test_a_run_that_gave_threads_up_to_other_processes_is_contended():
+    """Its steps on one thread of the two it planned are not the two-thread cost."""
+    ds = _timed_run([1.0] * 3, [1.0] * 3).assign(step_threads=("time", [2.0, 1.0, 2.0]))
+    ds.attrs["numba_threads"] = 2
+    assert contention(ds)["contended"]
+    assert not contention(ds.assign(step_threads=("time", [2.0] * 3)))["contended"]
+
+
 def test_the_cost_fit_leaves_out_contended_runs_and_counts_them():
     cells = np.array([1e3, 8e3, 64e3, 512e3, 512e3])
     seconds = 1e-6 * cells**1.2
