@@ -7,6 +7,7 @@ waits for its slowest thread). This benchmark measures how much a step slows:
     PYTHONPATH=. python experiments/bench_contention.py [--resolution 64] [--steps 10]
         [--rounds 3] [--threads auto 1]
     PYTHONPATH=. python experiments/bench_contention.py --launchers [--sweep 48 64 80 96]
+    python experiments/bench_contention.py --runs 3 [--checkouts A B]
 
 For each thread setting it builds the ``experiment=scaling`` fence (resolution^3 cells,
 ``navier_stokes``), then alternates rounds of ``--steps`` steps alone and ``--steps`` steps
@@ -26,6 +27,13 @@ every core), the joblib launcher with ``n_jobs=2`` (two runs at once, one thread
 the basic launcher with ``runtime.threads=1`` (each run alone on one core: the idle
 one-core time). It writes experiments/results/bench_launchers.csv: each sweep's wall time
 and, per run, the median step and its ratio to the same run alone on one core.
+
+``--runs N`` checks it as a user sees it: separate ``windbench experiment=scaling
+wind=navier_stokes`` runs (``--resolution``, default threads), alone and then beside the
+busy process, N times; with ``--checkouts`` each round runs every checkout's code in turn
+(``PYTHONPATH``), an A/B in one alternation. It writes
+experiments/results/bench_contention_runs.csv: per run pair the code version, the median
+step (first excluded) and thread count alone and beside, and their ratio.
 """
 
 from __future__ import annotations
@@ -101,6 +109,53 @@ def measure(setting, args) -> dict:
     }
 
 
+def separate_run(checkout: str | None, resolution: int, folder: Path) -> dict:
+    """One ``experiment=scaling`` Navier-Stokes run with the code of ``checkout`` (None:
+    as installed): its code version, median step (first excluded) and thread count."""
+    import os
+
+    import xarray as xr
+
+    env = {**os.environ, **({"PYTHONPATH": checkout} if checkout else {})}
+    cmd = ["windbench", "experiment=scaling", "wind=navier_stokes",
+           f"grid.resolution={resolution}", f"hydra.run.dir={folder}"]  # fmt: skip
+    subprocess.run(cmd, check=True, capture_output=True, env=env)
+    with xr.open_dataset(folder / "windbench.nc") as ds:
+        names = [str(p) for p in ds["phase"].values]
+        steps = ds["step_seconds"].values[1:, names.index("total")]
+        threads = ds["step_threads"].values[1:] if "step_threads" in ds else [np.nan]
+        return {"commit": ds.attrs["git_commit"], "step": float(np.median(steps)),
+                "threads": float(np.median(threads))}  # fmt: skip
+
+
+def separate_runs(args) -> pd.DataFrame:
+    """``--runs``: each checkout's run alone, then beside the busy process, per round."""
+    import tempfile
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for checkout in args.checkouts:  # warm each version's numba cache
+            separate_run(checkout, args.resolution, Path(tmp) / "warm")
+        for round_ in range(args.runs):
+            for checkout in args.checkouts:
+                alone = separate_run(checkout, args.resolution, Path(tmp) / "alone")
+                busy = subprocess.Popen([sys.executable, "-c", BUSY])
+                try:
+                    time.sleep(SETTLE)
+                    beside = separate_run(checkout, args.resolution, Path(tmp) / "beside")
+                finally:
+                    busy.kill()
+                    busy.wait()
+                rows.append({
+                    "round": round_, "commit": alone["commit"], "resolution": args.resolution,
+                    "alone_step_seconds": alone["step"], "busy_step_seconds": beside["step"],
+                    "ratio": beside["step"] / alone["step"], "alone_threads": alone["threads"],
+                    "busy_threads": beside["threads"], "load_after": load_average()[0],
+                })  # fmt: skip
+                print(rows[-1], flush=True)
+    return pd.DataFrame(rows)
+
+
 def sweep(name: str, resolutions, folder: Path) -> tuple[float, pd.DataFrame]:
     """Run the scaling sweep with launcher ``name``: (wall seconds, median step per run)."""
     out = folder / name
@@ -166,8 +221,12 @@ def main():
     parser.add_argument("--threads", nargs="+", default=["auto", "1"])
     parser.add_argument("--launchers", action="store_true")
     parser.add_argument("--sweep", type=int, nargs="+", default=[48, 64, 80, 96])
+    parser.add_argument("--runs", type=int, default=0)
+    parser.add_argument("--checkouts", nargs="+", default=[None])
     args = parser.parse_args()
-    if args.launchers:
+    if args.runs:
+        table, out = separate_runs(args), RESULTS / "bench_contention_runs.csv"
+    elif args.launchers:
         table, out = launchers(args), RESULTS / "bench_launchers.csv"
     else:
         rows = [measure(s if s == AUTO else int(s), args) for s in args.threads]
