@@ -115,6 +115,10 @@ def test_the_budget_follows_the_load_every_recheck_and_restores_its_plan():
         machine.advance(runtime.RECHECK, elsewhere=1.0, own=1.0)
         assert budget.update() == 1
         assert budget.restore() == 2 and numba.get_num_threads() == 2
+        machine.advance(10.0, elsewhere=1.0, own=1.0)  # a long first step beside a compile
+        budget.restart()
+        machine.advance(runtime.RECHECK, elsewhere=0.0, own=2.0)
+        assert budget.update() == 2  # the reading covers the steps only
         fixed = runtime.ThreadBudget(2, adaptive=False, watch=machine.watch())
         machine.advance(10 * runtime.RECHECK, elsewhere=2.0, own=0.0)
         assert fixed.update() == 2

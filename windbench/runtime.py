@@ -171,6 +171,13 @@ class ThreadBudget:
                 self.current = use_threads(wanted)
         return self.current
 
+    def restart(self):
+        """Read the load afresh from now on: the time before (a first step that compiled,
+        beside the process that compiled the cloth's kernels) says nothing of the steps."""
+        if self.watch is not None:
+            self.watch.reading()
+            self.checked = self.clock()
+
     def restore(self) -> int:
         """Back to the planned count (what the dataset records as the run's threads)."""
         self.current = use_threads(self.planned)

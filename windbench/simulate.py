@@ -607,8 +607,10 @@ class Simulation:
         lines = runtime.ProgressLog(label, total) if progress and not terminal else None
         for n in bar:
             self.step(n)
-            if n == 0 and first_step_done is not None:  # every kernel compiled or loaded
-                first_step_done()
+            if n == 0:  # every kernel compiled or loaded
+                self.budget.restart()
+                if first_step_done is not None:
+                    first_step_done()
             if lines is not None:
                 lines.update(n + 1)
         return self.recorder

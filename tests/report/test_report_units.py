@@ -165,11 +165,13 @@ def test_a_run_that_waited_for_a_core_or_shared_a_loaded_machine_is_contended():
 
 
 def test_a_run_that_gave_threads_up_to_other_processes_is_contended():
-    """Its steps on one thread of the two it planned are not the two-thread cost."""
+    """Its steps on one thread of the two it planned are not the two-thread cost; the first
+    step (compile) is left out, as from the wall/CPU ratio."""
     ds = _timed_run([1.0] * 3, [1.0] * 3).assign(step_threads=("time", [2.0, 1.0, 2.0]))
     ds.attrs["numba_threads"] = 2
     assert contention(ds)["contended"]
     assert not contention(ds.assign(step_threads=("time", [2.0] * 3)))["contended"]
+    assert not contention(ds.assign(step_threads=("time", [1.0, 2.0, 2.0])))["contended"]
 
 
 def test_the_cost_fit_leaves_out_contended_runs_and_counts_them():

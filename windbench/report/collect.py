@@ -330,8 +330,8 @@ def contention(ds: xr.Dataset) -> dict:
     ``load_average_peak`` (the larger 1-minute load average at start and end) and
     ``contended``: the ratio above WALL_CPU_LIMIT (the process waited for a core), the
     load above the machine's cores + LOAD_MARGIN (more runnable threads than cores) or a
-    step run on fewer threads than the run's own (``step_threads``: the run gave cores up
-    to other processes). Datasets without these (older ones) are not flagged."""
+    step after the first run on fewer threads than the run's own (``step_threads``: the
+    run gave cores up to other processes). Datasets without these (older ones) are not flagged."""
     ratio = math.nan
     if "step_cpu_seconds" in ds and "step_seconds" in ds and ds.sizes.get("time", 0) > 1:
         wall = np.asarray(ds["step_seconds"].sel(phase="total").values, dtype=float)[1:]
@@ -342,7 +342,7 @@ def contention(ds: xr.Dataset) -> dict:
     peak = float(max(loads)) if loads else math.nan
     cores = float(ds.attrs.get("cpu_count", math.nan))
     gave_up = "step_threads" in ds and bool(
-        (ds["step_threads"].values < int(ds.attrs.get("numba_threads", 0))).any()
+        (ds["step_threads"].values[1:] < int(ds.attrs.get("numba_threads", 0))).any()
     )
     contended = bool(ratio > WALL_CPU_LIMIT or peak > cores + LOAD_MARGIN or gave_up)
     return {"wall_cpu_ratio": ratio, "load_average_peak": peak, "contended": contended}
