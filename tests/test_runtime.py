@@ -47,7 +47,8 @@ def test_busy_time_of_a_cpu_set_is_read_from_proc_stat():
     """user + nice + system + irq + softirq + steal ticks (idle, iowait, guest left out)."""
     assert runtime.busy_seconds(STAT, [0], 0.01) == pytest.approx(0.38)
     assert runtime.busy_seconds(STAT, [0, 1], 0.01) == pytest.approx(1.08)
-    assert runtime.busy_seconds(STAT, [7], 0.01) == 0.0
+    with pytest.raises(ValueError, match="no line"):
+        runtime.busy_seconds(STAT, [0, 7], 0.01)
 
 
 class FakeMachine:
@@ -82,11 +83,12 @@ def test_cores_busy_elsewhere_are_the_busy_time_less_this_process_own():
     assert watch.reading() is None  # no wall time has passed
 
 
-def test_without_proc_stat_nothing_is_said():
+def test_without_proc_stat_or_a_line_for_each_core_nothing_is_said():
     def missing():
         raise OSError("no /proc/stat")
 
     assert runtime.BusyElsewhere([0, 1], missing).reading() is None
+    assert runtime.BusyElsewhere([0, 7], lambda: STAT).reading() is None
 
 
 @pytest.mark.parametrize(
@@ -133,7 +135,8 @@ def test_a_busy_process_is_seen_on_the_machine():
     watch = runtime.BusyElsewhere()
     busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
-        watch.reading()  # from here on, with the busy process
+        if watch.reading() is None:  # from here on, with the busy process
+            pytest.skip("this system's /proc/stat does not number the process's cores")
         time.sleep(0.5)
         assert watch.reading() >= 0.5
     finally:

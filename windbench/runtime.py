@@ -84,14 +84,18 @@ def use_threads(count: int) -> int:
 def busy_seconds(stat_text: str, cores, tick: float) -> float:
     """CPU seconds the ``cores`` (CPU numbers) have spent busy since boot, from the text of
     /proc/stat: user, nice, system, irq, softirq and steal ticks of each ``cpuN`` line
-    (guest time is inside user) times ``tick`` seconds."""
+    (guest time is inside user) times ``tick`` seconds. ValueError if a core has no line
+    (a container's /proc/stat may number its cores apart from the affinity's)."""
     wanted = {f"cpu{c}" for c in cores}
-    ticks = 0
+    ticks, found = 0, 0
     for line in stat_text.splitlines():
         fields = line.split()
         if fields and fields[0] in wanted:
             user, nice, system, _idle, _iowait, irq, softirq, steal = map(int, fields[1:9])
             ticks += user + nice + system + irq + softirq + steal
+            found += 1
+    if found < len(wanted):
+        raise ValueError(f"/proc/stat has no line for some of the cores {sorted(cores)}")
     return ticks * tick
 
 
