@@ -112,8 +112,10 @@ def test_the_budget_follows_the_load_every_recheck_and_restores_its_plan():
         assert budget.update() == 2  # not read yet: RECHECK has not passed
         machine.advance(runtime.RECHECK, elsewhere=1.0, own=1.0)
         assert budget.update() == 1 and numba.get_num_threads() == 1
+        assert budget.note() == "1 of 2 threads (cores busy elsewhere)"
         machine.advance(runtime.RECHECK, elsewhere=0.0, own=1.0)
         assert budget.update() == 2 and numba.get_num_threads() == 2
+        assert budget.note() == ""
         machine.advance(runtime.RECHECK, elsewhere=1.0, own=1.0)
         assert budget.update() == 1
         assert budget.restore() == 2 and numba.get_num_threads() == 2
@@ -277,6 +279,16 @@ def test_progress_lines_every_tenth_with_rate_and_time_left(caplog):
     assert lines[0] == "fence/navier_stokes:  10% (20/200 steps), 2 steps/s, ETA 1 min 30 s"
     assert lines[-1].startswith("fence/navier_stokes: 100% (200/200 steps)")
     assert [r.getMessage() for r in caplog.records] == lines
+
+
+def test_a_progress_line_ends_with_its_note():
+    clock = Clock()
+    progress = runtime.ProgressLog("fence", 10, clock=clock)
+    clock.now = 5.0
+    line = progress.update(1, "1 of 2 threads (cores busy elsewhere)")
+    assert line == (
+        "fence:  10% (1/10 steps), 0.2 steps/s, ETA 45 s; 1 of 2 threads (cores busy elsewhere)"
+    )
 
 
 def test_progress_marks_within_seconds_of_the_last_line_are_passed_over():

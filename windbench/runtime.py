@@ -175,6 +175,12 @@ class ThreadBudget:
                 self.current = use_threads(wanted)
         return self.current
 
+    def note(self) -> str:
+        """What a progress line says of the budget: nothing while it runs as planned."""
+        if self.current == self.planned:
+            return ""
+        return f"{self.current} of {self.planned} threads (cores busy elsewhere)"
+
     def restart(self):
         """Read the load afresh from now on: the time before (a first step that compiled,
         beside the process that compiled the cloth's kernels) says nothing of the steps."""
@@ -219,8 +225,9 @@ class ProgressLog:
         self.start = self.last = clock()
         self.mark = 1
 
-    def update(self, done: int) -> str | None:
-        """Called after step ``done`` (1-based); returns the line it logged, if any."""
+    def update(self, done: int, note: str = "") -> str | None:
+        """Called after step ``done`` (1-based); returns the line it logged, if any, with
+        ``note`` at its end."""
         if self.total <= 0 or done < self.mark * PROGRESS_EVERY * self.total - 1e-9:
             return None
         while self.mark * PROGRESS_EVERY * self.total <= done + 1e-9:
@@ -234,6 +241,6 @@ class ProgressLog:
         line = (
             f"{self.label}: {100 * done / self.total:3.0f}% ({done}/{self.total} steps), "
             f"{rate:.3g} steps/s, ETA {_duration((self.total - done) / rate)}"
-        )
+        ) + (f"; {note}" if note else "")
         log.info(line)
         return line

@@ -595,7 +595,8 @@ class Simulation:
 
     def run(self, progress: bool = True, first_step_done=None) -> Recorder:
         """All steps, spin-up included; ``progress``: a bar on a terminal, else a log
-        line every tenth of the run (:class:`windbench.runtime.ProgressLog`);
+        line every tenth of the run (:class:`windbench.runtime.ProgressLog`), either
+        saying when the run gave threads up (:meth:`windbench.runtime.ThreadBudget.note`);
         ``first_step_done()``, if given, is called once after the first step."""
         total = self.setup.spinup_steps + self.setup.n_steps
         label = f"{self.setup.scene.name}/{self.wind.name}"
@@ -605,14 +606,18 @@ class Simulation:
             mininterval=1.0,
         )  # fmt: skip
         lines = runtime.ProgressLog(label, total) if progress and not terminal else None
+        shown = ""  # the bar's note
         for n in bar:
             self.step(n)
             if n == 0:  # every kernel compiled or loaded
                 self.budget.restart()
                 if first_step_done is not None:
                     first_step_done()
+            note = self.budget.note()
             if lines is not None:
-                lines.update(n + 1)
+                lines.update(n + 1, note)
+            elif note != shown and not bar.disable:
+                bar.set_postfix_str(shown := note, refresh=False)
         return self.recorder
 
 
