@@ -93,11 +93,14 @@ def test_without_proc_stat_or_a_line_for_each_core_nothing_is_said():
 
 @pytest.mark.parametrize(
     ("planned", "cores", "elsewhere", "threads"),
-    [(2, 2, 0.0, 2), (2, 2, 0.4, 2), (2, 2, 0.67, 1), (2, 2, 1.0, 1), (2, 2, 2.5, 1),
-     (1, 2, 0.0, 1), (4, 16, 12.0, 4), (4, 16, 13.0, 3)],
+    [(2, 2, 0.0, 2), (2, 2, 0.4, 2), (2, 2, 0.67, 1), (2, 2, 1.0, 1), (2, 2, 2.5, 2),
+     (1, 2, 0.0, 1), (4, 16, 12.0, 4), (4, 16, 13.0, 3), (4, 16, 15.0, 4), (8, 8, 3.0, 5),
+     (8, 8, 4.0, 4), (8, 8, 6.0, 8)],
 )  # fmt: skip
-def test_a_run_leaves_the_cores_other_processes_keep_busy(planned, cores, elsewhere, threads):
-    """16 cores, four runs of four threads: the three others' twelve cores leave four."""
+def test_a_run_leaves_busy_cores_where_that_is_faster(planned, cores, elsewhere, threads):
+    """A loop over n threads of which some share a core takes 2/n of its one-thread time,
+    over n free cores 1/n. 16 cores, four runs of four threads: the three others' twelve
+    cores leave four; one core free of 16 is slower than four threads that share."""
     assert runtime.threads_beside(planned, cores, elsewhere) == threads
 
 

@@ -263,7 +263,7 @@ class RuntimeConfig:
         "auto",
         "1",
         "numba threads of the run; auto: the cores available / the launcher's parallel runs, "
-        "less the cores other processes keep busy (re-read as the run goes)",
+        "kept to the cores other processes leave free where that is faster (re-read as it runs)",
     )
     compile_ahead: bool = setting(
         True,

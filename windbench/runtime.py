@@ -5,8 +5,8 @@ this process may run on divided by the runs a launcher has in flight at once (at
 one), or the number given. A parallel sweep of two runs on two cores then gives each run
 one core instead of two threads each that take turns on both. Set with
 ``numba.set_num_threads`` before the run's first kernel; the dataset records it. Under
-``auto`` the run also gives up a thread for each of its cores that other processes keep
-busy, re-read as it runs (:class:`ThreadBudget`); the dataset records each step's count.
+``auto`` the run also keeps to the cores that other processes leave free where that is
+faster, re-read as it runs (:class:`ThreadBudget`); the dataset records each step's count.
 (A Navier-Stokes grid below ``threads.PARALLEL_CELLS`` cells runs serial kernels whatever
 the count: :mod:`windbench.wind.navier_stokes.threads`.)
 
@@ -132,21 +132,26 @@ class BusyElsewhere:
 
 
 def threads_beside(planned: int, cores: int, busy_elsewhere: float) -> int:
-    """The threads a run plans for, fewer where other processes keep cores busy:
-    min(planned, max(1, cores - round(busy_elsewhere)))."""
-    return max(1, min(int(planned), int(cores) - round(busy_elsewhere)))
+    """The threads for a run that plans ``planned`` of ``cores`` while other processes keep
+    ``busy_elsewhere`` cores busy: min(planned, free) with free = cores - round(busy
+    elsewhere) when free >= planned / 2, else ``planned``.
+
+    A parallel loop is split evenly among its n threads and ends when the slowest does. A
+    thread that shares its core with a busy process runs at half speed, so a loop takes
+    2 / n of its one-thread time when some of the n threads share, 1 / n when none does:
+    the free cores alone are the faster choice when free >= planned / 2 (on a tie they
+    leave the busy process its core)."""
+    free = int(cores) - round(busy_elsewhere)
+    return max(1, min(int(planned), free)) if 2 * free >= int(planned) else int(planned)
 
 
 class ThreadBudget:
     """The numba threads of a run's parallel kernels, step by step.
 
     ``planned`` threads (:func:`thread_count`); when ``adaptive`` (``runtime.threads=auto``)
-    at most one per core that other processes leave free (:func:`threads_beside`),
-    re-read every RECHECK s by :meth:`update`. A kernel's parallel loop is split evenly
-    among its threads and ends when the last one does, so a thread that shares its core
-    with a busy process holds every loop back; one thread on a free core is then the
-    faster choice (``experiments/bench_contention.py``). Kernels sum in a fixed order, so
-    the count changes timings only, never results."""
+    only the cores other processes leave free, where that is faster (:func:`threads_beside`),
+    re-read every RECHECK s by :meth:`update` (``experiments/bench_contention.py``).
+    Kernels sum in a fixed order, so the count changes timings only, never results."""
 
     def __init__(self, planned: int, adaptive: bool = False, watch=None, clock=time.monotonic):
         self.planned = int(planned)
