@@ -610,9 +610,9 @@ class Simulation:
         for n in bar:
             self.step(n)
             if n == 0:  # every kernel compiled or loaded
-                self.budget.restart()
                 if first_step_done is not None:
                     first_step_done()
+                self.budget.restart()
             note = self.budget.note()
             if lines is not None:
                 lines.update(n + 1, note)
