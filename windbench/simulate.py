@@ -633,8 +633,9 @@ def run(cfg: DictConfig, out_dir: Path, jobs: int = 1) -> RunResult:
 
     A ConfigError is raised before anything is written. The run's kernels use
     ``runtime.threads`` threads, ``auto`` sharing the cores with the ``jobs`` runs a
-    launcher has in flight (:func:`windbench.runtime.thread_count`) and leaving cores that
-    other processes keep busy (:class:`windbench.runtime.ThreadBudget`). A blow-up or any
+    launcher has in flight (:func:`windbench.runtime.thread_count`) and kept to the cores
+    other processes leave free where that is faster (:class:`windbench.runtime.ThreadBudget`,
+    which the dataset's ``numba_threads`` records as planned). A blow-up or any
     other exception during the loop writes what was recorded with ``status = failed`` and
     the reason.
     """
@@ -642,11 +643,8 @@ def run(cfg: DictConfig, out_dir: Path, jobs: int = 1) -> RunResult:
         runtime.thread_count(cfg.runtime.threads, jobs),
         adaptive=str(cfg.runtime.threads) == runtime.AUTO,
     )
-    try:
-        with compile_ahead.cloth_kernels(cfg, jobs) as helper:
-            return _run(cfg, out_dir, helper, budget)
-    finally:
-        budget.restore()
+    with compile_ahead.cloth_kernels(cfg, jobs) as helper:
+        return _run(cfg, out_dir, helper, budget)
 
 
 def _run(cfg: DictConfig, out_dir: Path, helper, budget: runtime.ThreadBudget) -> RunResult:

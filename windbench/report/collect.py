@@ -331,7 +331,8 @@ def contention(ds: xr.Dataset) -> dict:
     ``contended``: the ratio above WALL_CPU_LIMIT (the process waited for a core), the
     load above the machine's cores + LOAD_MARGIN (more runnable threads than cores) or a
     step after the first run on fewer threads than the run's own (``step_threads``: the
-    run gave cores up to other processes). Datasets without these (older ones) are not flagged."""
+    run gave cores up to other processes). Datasets without these (older ones) are not
+    flagged."""
     ratio = math.nan
     if "step_cpu_seconds" in ds and "step_seconds" in ds and ds.sizes.get("time", 0) > 1:
         wall = np.asarray(ds["step_seconds"].sel(phase="total").values, dtype=float)[1:]
