@@ -48,7 +48,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.bench_ns import Variant
-from windbench.runtime import AUTO, ThreadBudget, load_average, thread_count
+from windbench.runtime import AUTO, ThreadBudget, load_average
 
 RESULTS = Path(__file__).parent / "results"
 OUT = RESULTS / "bench_contention.csv"
@@ -84,7 +84,7 @@ def beside_busy(variant: Variant, budget: ThreadBudget, steps: int) -> list[tupl
 
 
 def measure(setting, args) -> dict:
-    budget = ThreadBudget(thread_count(setting), adaptive=setting == AUTO)
+    budget = ThreadBudget.of(setting)
     variant = Variant(args.resolution, "float64", "semi_lagrangian", None)
     load0 = load_average()[0]
     alone, busy = [], []
@@ -109,6 +109,12 @@ def measure(setting, args) -> dict:
     }
 
 
+def median_step(ds) -> float:
+    """A run dataset's median step time (wall, total), the first step (compile) left out."""
+    names = [str(p) for p in ds["phase"].values]
+    return float(np.median(ds["step_seconds"].values[1:, names.index("total")]))
+
+
 def separate_run(checkout: str | None, resolution: int, folder: Path) -> dict:
     """One ``experiment=scaling`` Navier-Stokes run with the code of ``checkout`` (None:
     as installed): its code version, median step (first excluded) and thread count."""
@@ -121,10 +127,8 @@ def separate_run(checkout: str | None, resolution: int, folder: Path) -> dict:
            f"grid.resolution={resolution}", f"hydra.run.dir={folder}"]  # fmt: skip
     subprocess.run(cmd, check=True, capture_output=True, env=env)
     with xr.open_dataset(folder / "windbench.nc") as ds:
-        names = [str(p) for p in ds["phase"].values]
-        steps = ds["step_seconds"].values[1:, names.index("total")]
         threads = ds["step_threads"].values[1:] if "step_threads" in ds else [np.nan]
-        return {"commit": ds.attrs["git_commit"], "step": float(np.median(steps)),
+        return {"commit": ds.attrs["git_commit"], "step": median_step(ds),
                 "threads": float(np.median(threads))}  # fmt: skip
 
 
@@ -176,11 +180,9 @@ def collect(folder: Path) -> pd.DataFrame:
     rows = []
     for path in sorted(folder.glob("*/windbench.nc")):
         with xr.open_dataset(path) as ds:
-            names = [str(p) for p in ds["phase"].values]
-            steps = ds["step_seconds"].values[1:, names.index("total")]
             rows.append({
                 "resolution": int(ds.attrs["grid_shape"][0]),
-                "step_seconds": float(np.median(steps)),
+                "step_seconds": median_step(ds),
                 "threads": int(ds.attrs.get("numba_threads", 0)),
             })  # fmt: skip
     return pd.DataFrame(rows).set_index("resolution")

@@ -161,6 +161,12 @@ class ThreadBudget:
         self.checked = clock()
 
     @classmethod
+    def of(cls, setting, jobs: int = 1) -> ThreadBudget:
+        """The budget of ``runtime.threads`` = ``setting`` with ``jobs`` runs in flight:
+        :func:`thread_count` planned, adaptive under ``auto``."""
+        return cls(thread_count(setting, jobs), adaptive=str(setting) == AUTO)
+
+    @classmethod
     def as_set(cls) -> ThreadBudget:
         """A fixed budget of the threads numba runs with now."""
         import numba

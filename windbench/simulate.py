@@ -639,10 +639,7 @@ def run(cfg: DictConfig, out_dir: Path, jobs: int = 1) -> RunResult:
     other exception during the loop writes what was recorded with ``status = failed`` and
     the reason.
     """
-    budget = runtime.ThreadBudget(  # before any kernel
-        runtime.thread_count(cfg.runtime.threads, jobs),
-        adaptive=str(cfg.runtime.threads) == runtime.AUTO,
-    )
+    budget = runtime.ThreadBudget.of(cfg.runtime.threads, jobs)  # before any kernel
     with compile_ahead.cloth_kernels(cfg, jobs) as helper:
         return _run(cfg, out_dir, helper, budget)
 
