@@ -20,14 +20,17 @@ from pathlib import Path
 
 import pandas as pd
 
+from windbench.report.collect import with_backend
 from windbench.report.comparison import own_cost
 
 ROOT = Path(__file__).resolve().parents[1]
 START, END = "<!-- results:start -->", "<!-- results:end -->"
 BACKENDS = ("global", "particles", "particles/mixing", "navier_stokes")
+# the lee force ratio also of the pressure-coupled Navier-Stokes wind (sweep paper_coupling)
+FORCE_MODELS = (*BACKENDS, "navier_stokes/projection")
 TIMES = ROOT / "experiments" / "results" / "paper_comparison_time.csv"
-SWEEPS = ("paper", "paper_seeds", "paper_mixing", "fence", "fence_mixing")  # the report's runs
-LEE_MODEL = "wind.lee_model"  # the particles' lee model: paper (default) or mixing
+# the report's runs
+SWEEPS = ("paper", "paper_seeds", "paper_mixing", "paper_coupling", "fence", "fence_mixing")
 
 
 def _fmt(x) -> str:
@@ -46,21 +49,23 @@ def _with_noise(runs: pd.DataFrame) -> str:
 
 def results_table(summary: pd.DataFrame, references: pd.DataFrame) -> str:
     done = summary[(summary["status"] == "complete") & ~summary["reference_level"].astype(bool)]
-    mixing = done.get(LEE_MODEL, pd.Series("", index=done.index)).eq("mixing")
-    done = done.assign(backend=done["wind"].where(~mixing, "particles/mixing"), cost=own_cost(done))
+    done = with_backend(done).assign(cost=own_cost(done))
     rows = ["| scene | reference GCI | " + " | ".join(
-        f"{b}: lee error / cost" for b in BACKENDS) + " | lee force ratio (global / particles / mixing / NS) |",
+        f"{b}: lee error / cost" for b in BACKENDS) + " | lee force ratio (" + " / ".join(
+        FORCE_MODELS) + ") |",
         "|---|---|" + "---|" * len(BACKENDS) + "---|"]  # fmt: skip
     gci = dict(zip(references["scene"], references["GCI"], strict=True))
     noise = references.get("e21 sampling noise", pd.Series(dtype=float))
     e21_noise = dict(zip(references["scene"], noise, strict=False))
     for scene, g in done.groupby("scene", sort=True):
         finest = g[g["resolution"] == g["resolution"].max()]
-        cells, ratios = [], []
+        cells = []
         for b in BACKENDS:
             run = finest[finest["backend"] == b]
             cells.append(f"{_with_noise(run)} / {_fmt(run['cost'].median())} s")
-            ratios.append(_fmt(run["lee_force_ratio"].mean()))
+        ratios = [
+            _fmt(finest[finest["backend"] == m]["lee_force_ratio"].mean()) for m in FORCE_MODELS
+        ]
         res = int(finest["resolution"].iloc[0])
         rows.append(
             f"| {scene} ({res} cells) | {_fmt(gci.get(scene))}{_noise(e21_noise.get(scene))} | "

@@ -18,7 +18,7 @@ import xarray as xr  # noqa: E402
 from tests.report.tiny_runs import run_ok  # noqa: E402
 from windbench.report import build_report  # noqa: E402
 from windbench.report import comparison as C  # noqa: E402
-from windbench.report.collect import read_runs, swept_keys  # noqa: E402
+from windbench.report.collect import backend_label, read_runs, swept_keys  # noqa: E402
 
 FENCE = ["scene=fence", "grid.resolution=48", "sim.dt=0.4", "sim.duration=1.2"]
 
@@ -64,7 +64,11 @@ def test_the_comparison_tells_the_lee_models_apart(lee_report):
         ("particles", "paper", "particles"),
         ("particles", None, "particles"),  # a run made before the lee model existed
         ("navier_stokes", float("nan"), "navier_stokes"),
+        ("navier_stokes", "paper", "navier_stokes"),  # the paper's cloth coupling (§4.1.2)
+        ("navier_stokes", "projection", "navier_stokes/projection"),
+        ("navier_stokes", "none", "navier_stokes/none"),
+        ("global", "mixing", "global"),  # no models: a stray value names none
     ],
 )
 def test_backend_labels(wind, lee, label):
-    assert C.backend_label(wind, lee) == label
+    assert backend_label(wind, lee) == label

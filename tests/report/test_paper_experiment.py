@@ -110,8 +110,21 @@ def test_the_mixing_lee_is_swept_where_the_papers_lee_is():
     assert set(_sweep("paper_mixing")["sim.dt"]) == set(seeds["sim.dt"])
 
 
+def test_the_couplings_are_swept_where_the_papers_coupling_is():
+    """paper_coupling runs the Navier-Stokes wind's other cloth couplings on the scene with
+    a sheltered flag, at every resolution and time step that paper runs its coupling at."""
+    paper, coupling = _sweep("paper"), _sweep("paper_coupling")
+    assert coupling["wind"] == ["navier_stokes"] and coupling["scene"] == ["two_flags_wall"]
+    assert set(coupling["wind.coupling"]) == {"projection", "none"}
+    assert "navier_stokes" in paper["wind"] and "two_flags_wall" in paper["scene"]
+    assert _resolutions(coupling) == _resolutions(paper)
+    assert set(coupling["sim.dt"]) == set(paper["sim.dt"])
+    assert compose_config(["experiment=paper"]).wind.get("coupling") is None  # global's
+    assert compose_config(["experiment=paper", "wind=navier_stokes"]).wind.coupling == "paper"
+
+
 @pytest.mark.parametrize(
-    "experiment", ["paper", "fence", "reference", "paper_mixing", "fence_mixing"]
+    "experiment", ["paper", "fence", "reference", "paper_mixing", "fence_mixing", "paper_coupling"]
 )
 def test_every_run_of_the_sweeps_passes_the_run_checks(experiment):
     params = _sweep(experiment)

@@ -25,10 +25,13 @@ from windbench.report.collect import (
 )
 from windbench.report.comparison import pareto_front, spans_a_decade
 from windbench.report.figures import (
+    BACKEND_COLORS,
     _wake_span,
     cost_exponents,
+    fig_force_ratio_resolution,
     fit_exponent,
     hoerner_long_plate,
+    pick,
     plate_table,
     tagging_field,
 )
@@ -359,3 +362,51 @@ def test_a_lee_slice_spans_the_near_wake_inside_the_domain():
     assert _wake_span(scene, lo, hi) == pytest.approx((0.0, 12.7))
     scene.upper[0] = 10.0
     assert _wake_span(scene, lo, hi) == (0.0, 10.0)
+
+
+def _force_ratios() -> pd.DataFrame:
+    """Sheltered-flag force ratios of two models of each of two backends at two
+    resolutions, each model's constant: a mean over models would be none of them."""
+    ratio = {
+        ("particles", "paper"): 0.001,
+        ("particles", "mixing"): 0.07,
+        ("navier_stokes", "paper"): 0.01,
+        ("navier_stokes", "projection"): 0.1,
+    }
+    rows = [
+        {
+            "wind": wind,
+            "wind.lee_model": model if wind == "particles" else "",
+            "wind.coupling": model if wind == "navier_stokes" else "",
+            "scene": "two_flags_wall",
+            "resolution": res,
+            "dt": 0.02,
+            "lee_force_ratio": value,
+        }
+        for (wind, model), value in ratio.items()
+        for res in (20, 40)
+    ]
+    return pd.DataFrame(rows)
+
+
+def test_the_measured_figures_keep_the_models_of_a_backend_apart():
+    """One line per model (particles/mixing, navier_stokes/projection beside the paper's
+    models), each at its own ratio, in the model's colour."""
+    drawn = fig_force_ratio_resolution(_force_ratios())
+    lines = [ln for ln in drawn.figure.axes[0].get_lines() if len(ln.get_xdata())]
+    got = sorted((ln.get_color(), *ln.get_ydata()) for ln in lines)
+    want = {"particles": 0.001, "particles/mixing": 0.07, "navier_stokes": 0.01}
+    want["navier_stokes/projection"] = 0.1
+    assert got == sorted((BACKEND_COLORS[m], v, v) for m, v in want.items())
+    assert len(set(BACKEND_COLORS.values())) == len(BACKEND_COLORS)
+
+
+def test_the_papers_figures_pick_the_papers_model():
+    """A finer run of another model does not stand for the backend in the paper's figures."""
+    settings = dict(wind="navier_stokes", scene="two_flags_wall", dt=0.02, seed=0)
+    paper = RunRecord(Path("/a/windbench.nc"), "complete", settings={**settings, "resolution": 40})
+    paper.config = {"wind.coupling": "paper"}
+    finer = RunRecord(Path("/b/windbench.nc"), "complete", settings={**settings, "resolution": 80})
+    finer.config = {"wind.coupling": "projection"}
+    assert pick([finer, paper], "two_flags_wall", "navier_stokes") is paper
+    assert pick([finer], "two_flags_wall", "navier_stokes") is finer

@@ -32,6 +32,7 @@ from windbench.report.collect import (
     sort_key,
     summary_frame,
     swept_keys,
+    with_backend,
 )
 from windbench.report.document import FigureRef, Note, Section, Table, Text, to_html, to_markdown
 from windbench.report.lee import Reference, assign_lee_errors, choose_references
@@ -113,7 +114,7 @@ def comparison_table(df: pd.DataFrame) -> pd.DataFrame:
         "lee_force_ratio": "lee force ratio",
         "lee_speed_ratio": "lee speed ratio",
     }
-    d = C.with_backend(df)  # the particles' lee models apart
+    d = with_backend(df)  # the models of one backend apart
     d["seconds_per_step_median"] = d["seconds_per_step_median"] * 1e3
     d["wind_seconds_median"] = d["wind_seconds_median"] * 1e3
     if "is_reference" in d:  # the reference's own error (0) would dilute the mean
@@ -135,7 +136,7 @@ def cloth_table(df: pd.DataFrame) -> pd.DataFrame:
     }
     if df.empty or not set(cols) <= set(df):
         return pd.DataFrame()
-    d = C.with_backend(df)
+    d = with_backend(df)
     d["max_penetration_peak"] = d["max_penetration_peak"] * 1e3
     g = d.groupby(["scene", "backend"], sort=True)
     out = g[list(cols)].max()
@@ -148,7 +149,7 @@ def lee_at_a_glance(df: pd.DataFrame) -> pd.DataFrame:
     """Per scene and backend, the finest run's lee speed ratio (and force ratio, if any)."""
     if df.empty:
         return df
-    d = C.with_backend(df).sort_values(["resolution", "dt"], ascending=[False, True])
+    d = with_backend(df).sort_values(["resolution", "dt"], ascending=[False, True])
     finest = d.groupby(["scene", "backend"], sort=True).head(1)
     rows = []
     for scene, g in finest.groupby("scene", sort=True):
@@ -385,6 +386,7 @@ def _measured_section(complete, place) -> Section:
             place(F.fig_cost_particles(complete)),
             place(F.fig_divergence(complete)),
             place(F.fig_force_ratio_dt(complete)),
+            place(F.fig_force_ratio_resolution(complete)),
             Table(
                 comparison_table(complete),
                 "Per scene, backend and resolution (mean over the other settings; the lee "

@@ -64,6 +64,11 @@ SETTINGS = {
     "dt": "sim.dt",
     "seed": "seed",
 }
+# The setting that picks a backend's model where it has more than one: the particles' lee
+# (paper §4.2.2, or the ``mixing`` lee) and the Navier-Stokes wind's cloth coupling (paper
+# §4.1.2, or ``projection`` and ``none``). PAPER_MODEL is the value that names the paper's.
+MODEL_KEYS = {"particles": "wind.lee_model", "navier_stokes": "wind.coupling"}
+PAPER_MODEL = "paper"
 # config keys that never count as swept settings (scene contents follow from scene.name)
 IGNORED = ("scene.", "output.", "hydra.", "sim.progress", "resume", "experiment")
 REQUIRED = ("wind", "step_seconds", "cloth_position", "divergence_rms")
@@ -692,3 +697,33 @@ def _annotate_results(ds: xr.Dataset, records: Sequence[RunRecord]) -> None:
 def code_versions(records: Sequence[RunRecord]) -> list[str]:
     """The code versions that made the readable runs among ``records``, sorted."""
     return sorted({r.code for r in records if r.code})
+
+
+def backend_label(wind, model) -> str:
+    """The model a run stands for: the backend's name for the paper's model, else
+    ``backend/model`` (``particles/mixing``, ``navier_stokes/projection``); ``model`` is
+    the value of the backend's :data:`MODEL_KEYS` setting (None or NaN for a run made
+    before that setting existed: the paper's)."""
+    if wind in MODEL_KEYS and isinstance(model, str) and model not in ("", PAPER_MODEL):
+        return f"{wind}/{model}"
+    return str(wind)
+
+
+def with_backend(df: pd.DataFrame) -> pd.DataFrame:
+    """df with a ``backend`` column (:func:`backend_label`) beside ``wind``."""
+    models = [
+        df.at[i, MODEL_KEYS[w]] if MODEL_KEYS.get(w) in df else None
+        for i, w in zip(df.index, df["wind"], strict=True)
+    ]
+    return df.assign(backend=[backend_label(w, m) for w, m in zip(df["wind"], models, strict=True)])
+
+
+def record_backend(record: RunRecord) -> str:
+    """:func:`backend_label` of a run record."""
+    wind = record.settings.get("wind")
+    return backend_label(wind, record.config.get(MODEL_KEYS.get(wind, "")))
+
+
+def is_paper_model(record: RunRecord) -> bool:
+    """Whether the run is of its backend's paper model (:func:`backend_label`)."""
+    return record_backend(record) == str(record.settings.get("wind"))

@@ -15,14 +15,13 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import FormatStrFormatter, NullFormatter
 
-from windbench.report.collect import display_path
+from windbench.report.collect import display_path, record_backend, with_backend
 from windbench.report.figures import Drawn, Missing, _color, _figure, timed
 from windbench.report.lee import Reference, beyond_noise
 
 COST_X = "seconds_per_simulated_second"
 CPU_X = "cpu_seconds_per_simulated_second"
 COST_LABEL = "s per simulated s"
-LEE_MODEL = "wind.lee_model"  # the particle backend's lee: paper | mixing
 RESOLUTION_MARKERS = "v<osD*Ph>"  # by rank of the resolutions in a table, coarsest first
 # Relative wind speed behind dense windbreaks (optical porosity < 20 %) at about half
 # their height, as summarised by Heisler & DeWalle (1988, Agric. Ecosyst. Environ.
@@ -32,20 +31,6 @@ SHELTER_RANGE = pd.DataFrame(
 ).assign(high=[0.3, 0.35, 0.65, 0.85, 0.95])
 SHELTER_SOURCE = "dense windbreaks, Heisler & DeWalle (1988), approximate range"
 SHELTER_HEIGHT = 0.5  # H: the height the range refers to
-
-
-def backend_label(wind, lee_model) -> str:
-    """The model a run stands for: the backend's name, ``particles/mixing`` for the particle
-    backend with its mixing lee (``particles`` alone is the paper's lee)."""
-    if wind == "particles" and isinstance(lee_model, str) and lee_model not in ("", "paper"):
-        return f"{wind}/{lee_model}"
-    return str(wind)
-
-
-def with_backend(df: pd.DataFrame) -> pd.DataFrame:
-    """df with a ``backend`` column (:func:`backend_label`) beside ``wind``."""
-    lee = df[LEE_MODEL] if LEE_MODEL in df else pd.Series(None, index=df.index, dtype=object)
-    return df.assign(backend=[backend_label(w, m) for w, m in zip(df["wind"], lee, strict=True)])
 
 
 def compared(df: pd.DataFrame) -> pd.DataFrame:
@@ -287,11 +272,7 @@ def wake_frame(records, refs: dict[str, Reference]) -> pd.DataFrame:
     for rec in [*records, *(ref.run for ref in refs.values())]:
         if rec.status != "complete" or rec.wake is None:
             continue
-        label = (
-            "reference"
-            if rec.path in ref_paths
-            else backend_label(rec.settings.get("wind"), rec.config.get(LEE_MODEL))
-        )
+        label = "reference" if rec.path in ref_paths else record_backend(rec)
         key = (rec.settings.get("scene"), label)
         best = finest.get(key)
         if best is None or int(rec.settings.get("resolution") or 0) > int(

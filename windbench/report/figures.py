@@ -11,8 +11,11 @@ speed that shows the lee; Fig. 6 the shirt with lee (particles) beside without (
 cells with the superposed ``w = sum w_i`` would give.
 
 §4.3 measured: cost per step against grid cells (log-log, fitted exponent), lee error and
-divergence against resolution, lee force ratio against time step, and the §3 force law as
-flat-plate coefficients beside Hoerner's measurements (Fluid-Dynamic Lift, 1985).
+divergence against resolution, lee force ratio against time step and resolution, and the
+§3 force law as flat-plate coefficients beside Hoerner's measurements (Fluid-Dynamic Lift,
+1985). These group runs by model (``backend``: :func:`~windbench.report.collect.backend_label`),
+so that the particles' two lee models and the Navier-Stokes wind's cloth couplings stay
+apart; the paper's figures show each backend's paper model.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: F401 - register
 from omegaconf import OmegaConf
 
 from windbench.aero import AeroParams, plate_coefficients
-from windbench.report.collect import AVERAGE_FROM, RunRecord
+from windbench.report.collect import AVERAGE_FROM, RunRecord, is_paper_model, with_backend
 from windbench.report.frames import (
     FRONT_BAND,
     RunFrames,
@@ -50,6 +53,8 @@ BACKEND_COLORS = {
     "particles": "tab:orange",
     "particles/mixing": "tab:red",
     "navier_stokes": "tab:green",
+    "navier_stokes/projection": "tab:purple",
+    "navier_stokes/none": "tab:brown",
 }
 MARKERS = "osD^v<>ph*"
 LINESTYLES = ("-", "--", ":", "-.")
@@ -124,7 +129,9 @@ def _metadata(ext: str) -> dict:
 
 
 def pick(records: Sequence[RunRecord], scene: str, wind: str) -> RunRecord | None:
-    """The finest complete run of (scene, wind): highest resolution, smallest dt, lowest seed."""
+    """The finest complete run of (scene, wind): the paper's model of the backend where
+    there is one (:func:`~windbench.report.collect.is_paper_model`), highest resolution,
+    smallest dt, lowest seed."""
     runs = [
         r
         for r in records
@@ -137,11 +144,13 @@ def pick(records: Sequence[RunRecord], scene: str, wind: str) -> RunRecord | Non
 
 def _finest_first(rec: RunRecord) -> tuple:
     s = rec.settings
-    return (-int(s["resolution"]), float(s["dt"]), int(s["seed"]), str(rec.path))
+    paper = is_paper_model(rec)
+    return (not paper, -int(s["resolution"]), float(s["dt"]), int(s["seed"]), str(rec.path))
 
 
 def pick_with_frames(records: Sequence[RunRecord], scene: str, wind: str):
-    """(record, frames) of the finest complete run of (scene, wind) that kept frames, or None."""
+    """(record, frames) of the run :func:`pick` would choose among those that kept frames,
+    or None."""
     runs = [
         r
         for r in records
@@ -770,7 +779,7 @@ def fit_exponent(cells, seconds) -> float:
     return float(np.polyfit(np.log(cells[ok]), np.log(seconds[ok]), 1)[0])
 
 
-def _series(df: pd.DataFrame, x: str, y: str, by=("wind", "scene")):
+def _series(df: pd.DataFrame, x: str, y: str, by=("backend", "scene")):
     """Mean of y at each x within each group (other settings averaged)."""
     d = df[np.isfinite(df[y].astype(float))]
     for key, g in d.groupby(list(by), sort=True):
@@ -788,26 +797,27 @@ def timed(df: pd.DataFrame, contended: bool = False) -> pd.DataFrame:
 
 
 def cost_exponents(df: pd.DataFrame, contended: bool = False) -> pd.DataFrame:
-    """Fitted p of wind-phase time ~ cells^p per backend (all scenes) and per scene, over
-    the runs :func:`timed` keeps; ``left out (contended)`` counts the others."""
+    """Fitted p of wind-phase time ~ cells^p per model (``backend``, :func:`with_backend`;
+    all scenes) and per scene, over the runs :func:`timed` keeps; ``left out
+    (contended)`` counts the others."""
     rows = []
     d = df[np.isfinite(df[WIND_COST].astype(float))] if WIND_COST in df else df.iloc[0:0]
-    for wind, g in d.groupby("wind", sort=True):
+    for model, g in with_backend(d).groupby("backend", sort=True):
         k = timed(g, contended)
-        row = _exponent_row(wind, "all scenes", k["grid_cells"], k[WIND_COST])
+        row = _exponent_row(model, "all scenes", k["grid_cells"], k[WIND_COST])
         rows.append({**row, "left out (contended)": len(g) - len(k)})
         for scene, gs in g.groupby("scene", sort=True):
             ks = timed(gs, contended)
             s = ks.groupby("grid_cells")[WIND_COST].mean().sort_index()
-            row = _exponent_row(wind, scene, s.index.values, s.values)
+            row = _exponent_row(model, scene, s.index.values, s.values)
             rows.append({**row, "left out (contended)": len(gs) - len(ks)})
     return pd.DataFrame(rows)
 
 
-def _exponent_row(wind, scene, cells, seconds) -> dict:
+def _exponent_row(model, scene, cells, seconds) -> dict:
     cells = np.asarray(cells, dtype=float)
     return {
-        "wind": wind,
+        "backend": model,
         "scene": scene,
         "runs": len(cells),
         "cells": f"{int(cells.min())}..{int(cells.max())}" if len(cells) else "",
@@ -826,13 +836,13 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
     fig = _figure(6.4, 4.4)
     ax = fig.add_subplot()
     scenes = sorted(d["scene"].unique())
-    for wind, g in d.groupby("wind", sort=True):
+    for model, g in with_backend(d).groupby("backend", sort=True):
         for scene, gs in g.groupby("scene", sort=True):
             ax.loglog(
                 gs["grid_cells"],
                 gs[WIND_COST] * 1e3,
                 MARKERS[scenes.index(scene) % len(MARKERS)],
-                color=_color(wind),
+                color=_color(model),
                 alpha=0.6,
                 ms=4,
             )
@@ -840,19 +850,19 @@ def fig_cost(df: pd.DataFrame) -> Drawn | Missing:
         if np.isfinite(p):
             c = np.geomspace(g["grid_cells"].min(), g["grid_cells"].max(), 20)
             lc, ls = np.log(g["grid_cells"]), np.log(g[WIND_COST])
-            ax.loglog(c, np.exp(ls.mean() + p * (np.log(c) - lc.mean())) * 1e3, color=_color(wind))
+            ax.loglog(c, np.exp(ls.mean() + p * (np.log(c) - lc.mean())) * 1e3, color=_color(model))
         ax.plot(
             [],
             [],
-            color=_color(wind),
-            label=f"{wind}" + (f": p = {p:.3g}" if np.isfinite(p) else ""),
+            color=_color(model),
+            label=f"{model}" + (f": p = {p:.3g}" if np.isfinite(p) else ""),
         )
     for scene in scenes:
         ax.plot([], [], MARKERS[scenes.index(scene) % len(MARKERS)], color="0.4", label=scene)
     caption = (
         "Median wall time of the wind phase (the backend's own step; cloth and aerodynamics "
         "excluded) per step, first step excluded, against the number of grid cells; lines are "
-        "least-squares fits of time ~ cells^p over all scenes of a backend, using only steps "
+        "least-squares fits of time ~ cells^p over all scenes of a model, using only steps "
         f"of at least 1 ms. Runs that shared their cores (contended) are left out: {left_out}."
     )
     return _cost_drawn(ax, "grid cells", Drawn("cost_vs_cells", title, caption, fig))
@@ -925,19 +935,20 @@ def _against(df: pd.DataFrame, spec: Against) -> Drawn | Missing:
     d = df[np.isfinite(df[y].astype(float))] if y in df else df.iloc[0:0]
     if d.empty:
         return Missing(spec.name, spec.title, spec.needs)
+    d = with_backend(d)
     fig = _figure(6.4, 4.4)
     ax = fig.add_subplot()
     scenes = sorted(d["scene"].unique())
     third = sorted(d[by[2]].unique()) if len(by) > 2 else []
     styles = {v: LINESTYLES[i % len(LINESTYLES)] for i, v in enumerate(third)}
     for key, s in _series(d, x, y, by):
-        wind, scene = key[0], key[1]
+        model, scene = key[0], key[1]
         ax.plot(
             s.index.values,
             s.values,
             marker=MARKERS[scenes.index(scene) % len(MARKERS)],
             linestyle=styles.get(key[2], "-") if len(key) > 2 else "-",
-            color=_color(wind),
+            color=_color(model),
         )
     if spec.logy and (d[y] > 0).all():
         ax.set_yscale("log")
@@ -948,8 +959,8 @@ def _against(df: pd.DataFrame, spec: Against) -> Drawn | Missing:
     ax.set_xlabel(spec.xlabel)
     ax.set_ylabel(spec.ylabel)
     ax.grid(True, which="both", alpha=0.3)
-    winds = sorted(d["wind"].unique(), key=_backend_order)
-    _legend_outside(fig, _shared_key(winds, scenes, by[2] if third else "", third))
+    models = sorted(d["backend"].unique(), key=_backend_order)
+    _legend_outside(fig, _shared_key(models, scenes, by[2] if third else "", third))
     return Drawn(spec.name, spec.title, spec.caption, fig)
 
 
@@ -972,7 +983,7 @@ class Against:
     needs: str
     logx: bool = False
     logy: bool = True
-    by: tuple[str, ...] = ("wind", "scene")
+    by: tuple[str, ...] = ("backend", "scene")
 
 
 ALL_RUNS = "complete runs: `windbench -m experiment=paper`"
@@ -1000,7 +1011,30 @@ MEASURED = {
         "`two_flags_wall` runs at several `sim.dt`: `windbench -m experiment=paper`",
         logx=True,
         logy=False,
-        by=("wind", "scene", "resolution"),
+        by=("backend", "scene", "resolution"),
+    ),
+    "force_ratio_resolution": Against(
+        "lee_force_ratio_vs_resolution",
+        "resolution",
+        "lee_force_ratio",
+        "Lee force ratio against resolution, per model",
+        "grid.resolution (cells along the longest axis)",
+        "|F sheltered| / |F exposed|",
+        "Steady-window mean of the force on the sheltered flag over the force on the "
+        "exposed one, per model (seeds averaged). `navier_stokes` is the paper's cloth "
+        "coupling (§4.1.2): before each step the air's velocity normal to the cloth is set "
+        "to the cloth's in the cells the cloth cuts, and the §3 law reads that air, so the "
+        "finer the grid, the nearer the cloth the air it reads. "
+        "`navier_stokes/projection`: the cloth closes the grid faces it crosses in the "
+        "pressure solve and feels the pressure jump across it. `navier_stokes/none`: "
+        "one-way, the §3 law in the wake the wall alone makes. `particles/mixing`: the "
+        "particles' mixing lee. The couplings on finer grids: "
+        "`experiments/results/projection_coupling*.csv`.",
+        "`two_flags_wall` runs at several resolutions: `windbench -m experiment=paper` and "
+        "`windbench -m experiment=paper_coupling`",
+        logx=True,
+        logy=False,
+        by=("backend", "scene", "dt"),
     ),
 }
 
@@ -1011,6 +1045,10 @@ def fig_divergence(df: pd.DataFrame) -> Drawn | Missing:
 
 def fig_force_ratio_dt(df: pd.DataFrame) -> Drawn | Missing:
     return _against(df, MEASURED["force_ratio"])
+
+
+def fig_force_ratio_resolution(df: pd.DataFrame) -> Drawn | Missing:
+    return _against(df, MEASURED["force_ratio_resolution"])
 
 
 def hoerner_long_plate(alpha):
