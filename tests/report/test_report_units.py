@@ -22,6 +22,7 @@ from windbench.report.collect import (
     flatten,
     swept_keys,
     window_mask,
+    with_backend,
 )
 from windbench.report.comparison import pareto_front, spans_a_decade
 from windbench.report.figures import (
@@ -410,3 +411,17 @@ def test_the_papers_figures_pick_the_papers_model():
     finer.config = {"wind.coupling": "projection"}
     assert pick([finer, paper], "two_flags_wall", "navier_stokes") is paper
     assert pick([finer], "two_flags_wall", "navier_stokes") is finer
+
+
+def test_model_labels_follow_the_rows_not_the_index():
+    """A frame concatenated from others may repeat index values: each row keeps its label."""
+    rows = _force_ratios()
+    repeated = rows.set_axis([0] * len(rows))
+    labels = with_backend(repeated)["backend"].tolist()
+    assert labels == with_backend(rows)["backend"].tolist()
+    assert labels[::2] == [
+        "particles",
+        "particles/mixing",
+        "navier_stokes",
+        "navier_stokes/projection",
+    ]

@@ -711,11 +711,12 @@ def backend_label(wind, model) -> str:
 
 def with_backend(df: pd.DataFrame) -> pd.DataFrame:
     """df with a ``backend`` column (:func:`backend_label`) beside ``wind``."""
+    winds = df["wind"].tolist()
+    keys = {key: df[key].tolist() for key in MODEL_KEYS.values() if key in df}
     models = [
-        df.at[i, MODEL_KEYS[w]] if MODEL_KEYS.get(w) in df else None
-        for i, w in zip(df.index, df["wind"], strict=True)
+        keys[MODEL_KEYS[w]][n] if MODEL_KEYS.get(w) in keys else None for n, w in enumerate(winds)
     ]
-    return df.assign(backend=[backend_label(w, m) for w, m in zip(df["wind"], models, strict=True)])
+    return df.assign(backend=[backend_label(w, m) for w, m in zip(winds, models, strict=True)])
 
 
 def record_backend(record: RunRecord) -> str:
