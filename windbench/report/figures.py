@@ -30,6 +30,7 @@ import pandas as pd
 import xarray as xr
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: F401 - registers "3d"
 from omegaconf import OmegaConf
 
@@ -954,8 +955,11 @@ def _against(df: pd.DataFrame, spec: Against) -> Drawn | Missing:
         ax.set_yscale("log")
     elif not spec.logy:
         ax.set_ylim(bottom=0, top=max(1.1, float(d[y].max()) * 1.1))
-    if spec.logx:
+    if spec.logx:  # the swept values as the ticks, in plain numbers
         ax.set_xscale("log")
+        values = sorted(d[x].unique())
+        ax.set_xticks(values, [f"{v:g}" for v in values])
+        ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel(spec.xlabel)
     ax.set_ylabel(spec.ylabel)
     ax.grid(True, which="both", alpha=0.3)
@@ -1033,7 +1037,6 @@ MEASURED = {
         "`two_flags_wall` runs at several resolutions: `windbench -m experiment=paper` and "
         "`windbench -m experiment=paper_coupling`",
         logx=True,
-        logy=False,
         by=("backend", "scene", "dt"),
     ),
 }
