@@ -13,13 +13,14 @@ For each thread setting it builds the ``experiment=scaling`` fence (resolution^3
 ``navier_stokes``), then alternates rounds of ``--steps`` steps alone and ``--steps`` steps
 beside a ``while True: pass`` process, so that a drift of the machine hits both alike.
 Each step runs on the threads a run's :class:`windbench.runtime.ThreadBudget` gives it:
-under ``auto`` fewer while the busy process holds a core. Writes
-experiments/results/bench_contention.csv: per thread setting the median step alone, the
-median step beside the busy process, their ratio, the median thread count of each, and the
-load average before and after (the busy process adds 1 to it; the idle rounds are only
-idle if the machine is); with a one-thread row, ``one_core_ratio``: the one-thread step
-alone over the row's step alone, the ratio a run shows when it leaves the busy process's
-core to it.
+under ``auto`` fewer while the busy process holds a core. Appends to
+experiments/results/bench_contention.csv, per thread setting: when (UTC) and with which
+code, the median step alone, the median step beside the busy process, their ratio, the
+median thread count of each, and the load average before and after (the busy process
+adds 1 to it; the idle rounds are only idle if the machine is); with a one-thread row,
+``one_core_ratio``: the one-thread step alone over the row's step alone, the ratio a run
+shows when it leaves the busy process's core to it. The file keeps every measurement: the
+ratio moves with the machine's speed from hour to hour.
 
 ``--launchers`` runs the ``experiment=scaling`` Navier-Stokes sweep over ``--sweep``
 resolutions three times: the basic launcher (one run at a time, ``runtime.threads=auto``:
@@ -42,16 +43,24 @@ import argparse
 import subprocess
 import sys
 import time
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from experiments.bench_ns import Variant
+from experiments.rows import append_rows
+from windbench.dataset import code_version, current_code
 from windbench.runtime import AUTO, ThreadBudget, load_average
 
 RESULTS = Path(__file__).parent / "results"
 OUT = RESULTS / "bench_contention.csv"
+FIELDS = (
+    "date", "code", "resolution", "runtime_threads", "threads", "steps_per_round", "rounds",
+    "alone_step_seconds", "busy_step_seconds", "ratio", "alone_threads", "busy_threads",
+    "load_before", "load_after", "one_core_ratio",
+)  # fmt: skip
 LAUNCHERS = {
     "basic": [],
     "joblib_2": ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
@@ -86,6 +95,7 @@ def beside_busy(variant: Variant, budget: ThreadBudget, steps: int) -> list[tupl
 def measure(setting, args) -> dict:
     budget = ThreadBudget.of(setting)
     variant = Variant(args.resolution, "float64", "semi_lagrangian", None)
+    date = datetime.now(UTC).isoformat(timespec="seconds")
     load0 = load_average()[0]
     alone, busy = [], []
     for _ in range(args.rounds):
@@ -94,6 +104,8 @@ def measure(setting, args) -> dict:
     (a, a_threads), (b, b_threads) = (np.median(np.array(x), axis=0) for x in (alone, busy))
     budget.restore()
     return {
+        "date": date,
+        "code": code_version(current_code()),
         "resolution": args.resolution,
         "runtime_threads": str(setting),
         "threads": budget.planned,
@@ -232,7 +244,11 @@ def main():
         table, out = launchers(args), RESULTS / "bench_launchers.csv"
     else:
         rows = [measure(s if s == AUTO else int(s), args) for s in args.threads]
-        table, out = with_one_core_ratio(pd.DataFrame(rows)), OUT
+        table = with_one_core_ratio(pd.DataFrame(rows)).reindex(columns=FIELDS)
+        print(table.to_string(index=False))
+        append_rows(OUT, table.to_dict("records"), FIELDS)
+        print(f"appended {len(table)} rows to {OUT}")
+        return
     print(table.to_string(index=False))
     table.to_csv(out, index=False)
     print(f"wrote {out}")
