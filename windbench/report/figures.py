@@ -1014,7 +1014,6 @@ MEASURED = {
         "exposed one; 1 means no lee, 0 a perfect shelter.",
         "`two_flags_wall` runs at several `sim.dt`: `windbench -m experiment=paper`",
         logx=True,
-        logy=False,
         by=("backend", "scene", "resolution"),
     ),
     "force_ratio_resolution": Against(
