@@ -238,20 +238,21 @@ def main():
     parser.add_argument("--runs", type=int, default=0)
     parser.add_argument("--checkouts", nargs="+", default=[None])
     args = parser.parse_args()
-    if args.runs:
-        table, out = separate_runs(args), RESULTS / "bench_contention_runs.csv"
-    elif args.launchers:
-        table, out = launchers(args), RESULTS / "bench_launchers.csv"
-    else:
-        rows = [measure(s if s == AUTO else int(s), args) for s in args.threads]
-        table = with_one_core_ratio(pd.DataFrame(rows)).reindex(columns=FIELDS)
+    if args.runs or args.launchers:  # the last measurement of each
+        table, out = (
+            (separate_runs(args), RESULTS / "bench_contention_runs.csv")
+            if args.runs
+            else (launchers(args), RESULTS / "bench_launchers.csv")
+        )
         print(table.to_string(index=False))
-        append_rows(OUT, table.to_dict("records"), FIELDS)
-        print(f"appended {len(table)} rows to {OUT}")
+        table.to_csv(out, index=False)
+        print(f"wrote {out}")
         return
+    rows = [measure(s if s == AUTO else int(s), args) for s in args.threads]
+    table = with_one_core_ratio(pd.DataFrame(rows)).reindex(columns=FIELDS)
     print(table.to_string(index=False))
-    table.to_csv(out, index=False)
-    print(f"wrote {out}")
+    append_rows(OUT, table.to_dict("records"), FIELDS)  # every measurement
+    print(f"appended {len(table)} rows to {OUT}")
 
 
 if __name__ == "__main__":
