@@ -43,6 +43,7 @@ import argparse
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -80,16 +81,25 @@ def timed_steps(variant: Variant, budget: ThreadBudget, steps: int) -> list[tupl
     return [(r["step"], n) for r, n in zip(variant.rows, threads, strict=True)]
 
 
-def beside_busy(variant: Variant, budget: ThreadBudget, steps: int) -> list[tuple[float, int]]:
-    """As :func:`timed_steps` while one CPU-bound process runs."""
+@contextmanager
+def busy_neighbour():
+    """One CPU-bound process (``BUSY``) for the time of the block, given SETTLE s to start."""
     busy = subprocess.Popen([sys.executable, "-c", BUSY])
     try:
         time.sleep(SETTLE)
-        return timed_steps(variant, budget, steps)
+        yield
     finally:
         busy.kill()
         busy.wait()
-        time.sleep(SETTLE)
+
+
+def beside_busy(variant: Variant, budget: ThreadBudget, steps: int) -> list[tuple[float, int]]:
+    """As :func:`timed_steps` while one CPU-bound process runs."""
+    try:
+        with busy_neighbour():
+            return timed_steps(variant, budget, steps)
+    finally:
+        time.sleep(SETTLE)  # the budget sees the busy process gone before the next round
 
 
 def measure(setting, args) -> dict:
@@ -155,13 +165,8 @@ def separate_runs(args) -> pd.DataFrame:
         for round_ in range(args.runs):
             for checkout in args.checkouts:
                 alone = separate_run(checkout, args.resolution, Path(tmp) / "alone")
-                busy = subprocess.Popen([sys.executable, "-c", BUSY])
-                try:
-                    time.sleep(SETTLE)
+                with busy_neighbour():
                     beside = separate_run(checkout, args.resolution, Path(tmp) / "beside")
-                finally:
-                    busy.kill()
-                    busy.wait()
                 rows.append({
                     "round": round_, "commit": alone["commit"], "resolution": args.resolution,
                     "alone_step_seconds": alone["step"], "busy_step_seconds": beside["step"],

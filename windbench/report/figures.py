@@ -133,6 +133,12 @@ def pick(records: Sequence[RunRecord], scene: str, wind: str) -> RunRecord | Non
     """The finest complete run of (scene, wind): the paper's model of the backend where
     there is one (:func:`~windbench.report.collect.is_paper_model`), highest resolution,
     smallest dt, lowest seed."""
+    runs = _runs_of(records, scene, wind)
+    return runs[0] if runs else None
+
+
+def _runs_of(records: Sequence[RunRecord], scene: str, wind: str) -> list[RunRecord]:
+    """The complete runs of (scene, wind), in the order :func:`pick` prefers them."""
     runs = [
         r
         for r in records
@@ -140,7 +146,7 @@ def pick(records: Sequence[RunRecord], scene: str, wind: str) -> RunRecord | Non
         and r.settings.get("scene") == scene
         and r.settings.get("wind") == wind
     ]
-    return min(runs, key=_finest_first) if runs else None
+    return sorted(runs, key=_finest_first)
 
 
 def _finest_first(rec: RunRecord) -> tuple:
@@ -152,14 +158,7 @@ def _finest_first(rec: RunRecord) -> tuple:
 def pick_with_frames(records: Sequence[RunRecord], scene: str, wind: str):
     """(record, frames) of the run :func:`pick` would choose among those that kept frames,
     or None."""
-    runs = [
-        r
-        for r in records
-        if r.status == "complete"
-        and r.settings.get("scene") == scene
-        and r.settings.get("wind") == wind
-    ]
-    for rec in sorted(runs, key=_finest_first):
+    for rec in _runs_of(records, scene, wind):
         frames = open_frames(rec.path)
         if frames is not None:
             return rec, frames
