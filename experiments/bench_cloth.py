@@ -42,11 +42,11 @@ import os
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # before numba is imported
 import platform
 import time
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
+from experiments.rows import measured_at
 from windbench.cli import compose_config
 from windbench.simulate import Simulation, prepare
 
@@ -191,7 +191,7 @@ def machine(row: dict) -> dict:
     row["load_average_1min"] = os.getloadavg()[0]
     row["cpus"] = os.cpu_count()
     row["machine"] = platform.processor() or platform.machine()
-    row["date"] = datetime.now(UTC).isoformat(timespec="seconds")
+    row["date"] = measured_at()
     return row
 
 

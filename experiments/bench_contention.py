@@ -44,15 +44,13 @@ import subprocess
 import sys
 import time
 from contextlib import contextmanager
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from experiments.bench_ns import Variant
-from experiments.rows import append_rows
-from windbench.dataset import code_version, current_code
+from experiments.rows import append_rows, stamp
 from windbench.runtime import AUTO, ThreadBudget, load_average
 
 RESULTS = Path(__file__).parent / "results"
@@ -105,7 +103,7 @@ def beside_busy(variant: Variant, budget: ThreadBudget, steps: int) -> list[tupl
 def measure(setting, args) -> dict:
     budget = ThreadBudget.of(setting)
     variant = Variant(args.resolution, "float64", "semi_lagrangian", None)
-    date = datetime.now(UTC).isoformat(timespec="seconds")
+    provenance = stamp()
     load0 = load_average()[0]
     alone, busy = [], []
     for _ in range(args.rounds):
@@ -114,8 +112,7 @@ def measure(setting, args) -> dict:
     (a, a_threads), (b, b_threads) = (np.median(np.array(x), axis=0) for x in (alone, busy))
     budget.restore()
     return {
-        "date": date,
-        "code": code_version(current_code()),
+        **provenance,
         "resolution": args.resolution,
         "runtime_threads": str(setting),
         "threads": budget.planned,

@@ -12,7 +12,8 @@ the same run.
 
 
 Writes experiments/results/bench_ns.csv: one row per resolution, precision and advection
-scheme (medians over the timed steps, after two warm-up steps and the settling ones)
+scheme (medians over the timed steps, after two warm-up steps and the settling ones),
+each with the ``date`` and ``code`` it was measured at (:func:`experiments.rows.stamp`),
 with ``baseline_seconds`` and ``ratio_to_baseline`` (the baseline as it ships: numba's
 default OpenMP wait, whose spinning threads start each parallel loop sooner) and
 ``baseline_passive_seconds`` and ``ratio_to_baseline_passive`` (the baseline under
@@ -59,6 +60,7 @@ import numba
 import numpy as np
 import pandas as pd
 
+from experiments.rows import stamp
 from experiments.validation_ns.problems import poiseuille, taylor_green
 from windbench import set_environment
 from windbench.cli import compose_config
@@ -189,8 +191,11 @@ def bench(resolution: int, args) -> list[dict]:
         for as_shipped, suffix in ((True, ""), (False, "_passive")):
             if args.baselines:
                 bases[suffix].append(baseline(resolution, args.baselines, as_shipped))
-    load = os.getloadavg()[0]
-    rows = [{**v.row(), "settle_steps": args.settle, "load_average_1min": load} for v in variants]
+    load, provenance = os.getloadavg()[0], stamp()
+    rows = [
+        {**provenance, **v.row(), "settle_steps": args.settle, "load_average_1min": load}
+        for v in variants
+    ]
     del variants
     for suffix, times in bases.items():
         base = float(np.median(times)) if times else np.nan
@@ -222,7 +227,7 @@ def validation(n: int = VALIDATION_CELLS) -> pd.DataFrame:
     )
     df["relative_change"] = (df.float32 / df.float64 - 1).abs()
     df["cells"] = n
-    return df.reset_index()
+    return pd.concat([pd.DataFrame([stamp()] * len(df)), df.reset_index()], axis=1)
 
 
 def main():

@@ -23,10 +23,9 @@ import json
 import os
 import subprocess
 import sys
-from datetime import UTC, datetime
 from pathlib import Path
 
-from experiments.rows import show_and_append
+from experiments.rows import measured_at, show_and_append
 
 OUT = Path(__file__).resolve().parent / "results" / "parallel_region.csv"
 FIELDS = ["date", "setup", "layer", "threads", "us_parallel", "us_serial", "load_average_1min"]
@@ -99,7 +98,7 @@ def main() -> None:
             continue
         rows.append(
             {
-                "date": datetime.now(UTC).isoformat(timespec="seconds"),
+                "date": measured_at(),
                 "setup": setup,
                 "layer": got["layer"],
                 "threads": got["threads"],

@@ -29,15 +29,13 @@ import os
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # before numba is imported
 import time
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
 from experiments.bench_cloth import flag_simulation
-from experiments.rows import show_and_append
+from experiments.rows import show_and_append, stamp
 from windbench.cloth import self_contact as sc_kernels
-from windbench.dataset import code_version, current_code
 
 OUT = Path(__file__).resolve().parent / "results" / "bench_self_contact.csv"
 FIELDS = [
@@ -120,8 +118,7 @@ def measure(nu: int, nv: int, frames: int, warmup: int, repeats: int) -> dict:
         lambda: sc_kernels.self_contacts(sc, inv_mass, x.copy(), anchor, fit), repeats=repeats
     )
     return {
-        "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "code": code_version(current_code()),
+        **stamp(),
         "nu": nu,
         "nv": nv,
         "triangles": tri.shape[0],

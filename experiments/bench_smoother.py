@@ -18,15 +18,13 @@ from __future__ import annotations
 import argparse
 import os
 import time
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numba
 import numpy as np
 
 from experiments.bench_ns import Variant
-from experiments.rows import show_and_append
-from windbench.dataset import code_version, current_code
+from experiments.rows import show_and_append, stamp
 from windbench.wind.navier_stokes import multigrid as mg
 
 OUT = Path(__file__).resolve().parent / "results" / "bench_smoother.csv"
@@ -57,8 +55,7 @@ def level_rows(resolution: int, calls: int) -> list[dict]:
         lev.slabs = versions["slabs"]
         plain, slabs = (1e3 * float(np.median(times[m])) for m in ("plain", "slabs"))
         rows.append(dict(
-            date=datetime.now(UTC).isoformat(timespec="seconds"),
-            code=code_version(current_code()), resolution=resolution,
+            **stamp(), resolution=resolution,
             level="x".join(map(str, lev.shape)), slabs=len(lev.slabs) - 1, calls=calls,
             ms_plain=round(plain, 4), ms_slabs=round(slabs, 4), ratio=round(slabs / plain, 3),
             threads=numba.get_num_threads(), load_average_1min=round(os.getloadavg()[0], 2),

@@ -21,13 +21,12 @@ import os
 import subprocess
 import sys
 import tempfile
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numba
 import numpy as np
 
-from experiments.rows import show_and_append
+from experiments.rows import measured_at, show_and_append
 
 OUT = Path(__file__).resolve().parent / "results" / "compile_first_use.csv"
 FIELDS = ["date", "numba", "case", "cpu_seconds_median", "cpu_seconds_min", "cpu_seconds_max",
@@ -81,7 +80,7 @@ def main() -> None:
         times = [first_use_seconds(body) for _ in range(args.runs)]
         rows.append(
             {
-                "date": datetime.now(UTC).isoformat(timespec="seconds"),
+                "date": measured_at(),
                 "numba": numba.__version__,
                 "case": name,
                 "cpu_seconds_median": round(float(np.median(times)), 3),

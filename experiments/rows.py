@@ -1,10 +1,27 @@
-"""Appending measured rows to a results CSV (``experiments/results/*.csv``)."""
+"""Measured rows for a results CSV (``experiments/results/*.csv``): when and with which
+code they were measured, and appending them to the file."""
 
 from __future__ import annotations
 
 import csv
 from collections.abc import Sequence
+from datetime import UTC, datetime
 from pathlib import Path
+
+
+def measured_at() -> str:
+    """The time now, UTC, to the second (ISO 8601): a row's ``date``."""
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def stamp() -> dict[str, str]:
+    """A row's provenance: ``date`` (:func:`measured_at`) and ``code``, the version and
+    git commit of the code measured (:func:`windbench.dataset.code_version`). windbench is
+    imported here, not with this module: importing it sets numba's environment
+    (:mod:`windbench`), which a script that times other settings must not inherit."""
+    from windbench.dataset import code_version, current_code
+
+    return {"date": measured_at(), "code": code_version(current_code())}
 
 
 def append_rows(path: Path, rows: Sequence[dict], fields: Sequence[str]) -> None:

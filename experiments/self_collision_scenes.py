@@ -20,12 +20,12 @@ import os
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # before numba is imported
 import time
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
 from experiments.bench_cloth import write_rows
+from experiments.rows import measured_at
 from windbench.cli import compose_config
 from windbench.dataset import run_dataset
 from windbench.simulate import Simulation, prepare
@@ -65,7 +65,7 @@ def case(scene: str, wind: str, self_collision: bool) -> dict:
         "cloth_ms_median": 1e3 * float(np.median(cloth)),
         "run_wall_s": wall,
         "load_average_1min": os.getloadavg()[0],
-        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "date": measured_at(),
     }
 
 
