@@ -5,7 +5,7 @@ threads a busy neighbour on one core can slow a step several-fold (every paralle
 waits for its slowest thread). This benchmark measures how much a step slows:
 
     PYTHONPATH=. python experiments/bench_contention.py [--resolution 64] [--steps 10]
-        [--rounds 3] [--threads auto 1]
+        [--rounds 3] [--threads auto 1] [--chunksize 0]
     PYTHONPATH=. python experiments/bench_contention.py --launchers [--sweep 48 64 80 96]
     python experiments/bench_contention.py --runs 3 [--checkouts A B]
 
@@ -20,7 +20,11 @@ median thread count of each, and the load average before and after (the busy pro
 adds 1 to it; the idle rounds are only idle if the machine is); with a one-thread row,
 ``one_core_ratio``: the one-thread step alone over the row's step alone, the ratio a run
 shows when it leaves the busy process's core to it. The file keeps every measurement: the
-ratio moves with the machine's speed from hour to hour.
+ratio moves with the machine's speed from hour to hour. ``--chunksize N`` hands each
+parallel loop's iterations out N at a time to whichever thread is free
+(``numba.set_parallel_chunksize``; column ``chunksize``, 0: numba's default, one equal
+share per thread): with ``--threads 2``, whether a run that keeps two threads beside the
+busy process gains from the share of its core that the scheduler gives it.
 
 ``--launchers`` runs the ``experiment=scaling`` Navier-Stokes sweep over ``--sweep``
 resolutions three times: the basic launcher (one run at a time, ``runtime.threads=auto``:
@@ -46,6 +50,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+import numba
 import numpy as np
 import pandas as pd
 
@@ -58,7 +63,7 @@ OUT = RESULTS / "bench_contention.csv"
 FIELDS = (
     "date", "code", "resolution", "runtime_threads", "threads", "steps_per_round", "rounds",
     "alone_step_seconds", "busy_step_seconds", "ratio", "alone_threads", "busy_threads",
-    "load_before", "load_after", "one_core_ratio",
+    "load_before", "load_after", "one_core_ratio", "chunksize",
 )  # fmt: skip
 LAUNCHERS = {
     "basic": [],
@@ -125,6 +130,7 @@ def measure(setting, args) -> dict:
         "busy_threads": b_threads,
         "load_before": load0,
         "load_after": load_average()[0],
+        "chunksize": numba.get_parallel_chunksize(),
     }
 
 
@@ -239,7 +245,9 @@ def main():
     parser.add_argument("--sweep", type=int, nargs="+", default=[48, 64, 80, 96])
     parser.add_argument("--runs", type=int, default=0)
     parser.add_argument("--checkouts", nargs="+", default=[None])
+    parser.add_argument("--chunksize", type=int, default=0)
     args = parser.parse_args()
+    numba.set_parallel_chunksize(args.chunksize)
     if args.runs or args.launchers:  # the last measurement of each
         table, out = (
             (separate_runs(args), RESULTS / "bench_contention_runs.csv")
