@@ -18,7 +18,8 @@ with ``baseline_seconds`` and ``ratio_to_baseline`` (the baseline as it ships: n
 default OpenMP wait, whose spinning threads start each parallel loop sooner) and
 ``baseline_passive_seconds`` and ``ratio_to_baseline_passive`` (the baseline under
 windbench's passive wait policy, which this process runs under; the two differ most on
-small grids). ``--set`` adds variants of further overrides (column ``overrides``;
+small grids), each with ``baseline..._advect_seconds``: the baseline's own timing of its
+advection (first-order, three trilinear lookups per face) beside ``advect_seconds``. ``--set`` adds variants of further overrides (column ``overrides``;
 ``""``: none). The variants of one resolution are stepped in turn (A, B, A, B, ...), so
 that a change in the machine's load hits them alike, and the steps are split into
 ``--rounds`` rounds, each followed by one run of the baseline each way: the baseline
@@ -156,8 +157,9 @@ class Variant:
 PHASES = ("advect", "diffuse", "eddy", "project")
 
 
-def baseline(resolution: int, folder: Path, as_shipped: bool) -> float:
-    """Median step (s) of the plain numba MGPCG baseline (float64 pressure) at N^3 cells:
+def baseline(resolution: int, folder: Path, as_shipped: bool) -> tuple[float, float]:
+    """Median step and median advection (s) of the plain numba MGPCG baseline (float64
+    pressure; its advection first-order, timed apart by the baseline itself) at N^3 cells:
     ``as_shipped`` in the environment a user runs it in (without the variables windbench
     set on import, so with numba's default, spinning, OpenMP wait), else in this process's
     (windbench's passive wait policy, :mod:`windbench`)."""
@@ -169,7 +171,8 @@ def baseline(resolution: int, folder: Path, as_shipped: bool) -> float:
         env={k: v for k, v in os.environ.items() if k not in drop},
     )  # fmt: skip
     line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT "))
-    return float(json.loads(line.removeprefix("RESULT "))["median_s"])
+    result = json.loads(line.removeprefix("RESULT "))
+    return float(result["median_s"]), float(result["advect_median_s"])
 
 
 def bench(resolution: int, args) -> list[dict]:
@@ -197,12 +200,16 @@ def bench(resolution: int, args) -> list[dict]:
         for v in variants
     ]
     del variants
-    for suffix, times in bases.items():
+    for suffix, runs in bases.items():
+        times, advects = zip(*runs, strict=True) if runs else ((), ())
         base = float(np.median(times)) if times else np.nan
         for row in rows:
             row[f"baseline{suffix}_seconds"] = base
             row[f"ratio_to_baseline{suffix}"] = row["step_seconds"] / base
             row[f"baseline{suffix}_rounds"] = " ".join(f"{t:.4f}" for t in times)
+            row[f"baseline{suffix}_advect_seconds"] = (
+                float(np.median(advects)) if advects else np.nan
+            )
     for row in rows:
         row["load_average_after_baseline"] = os.getloadavg()[0]
     return rows
