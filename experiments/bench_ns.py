@@ -20,8 +20,9 @@ default OpenMP wait, whose spinning threads start each parallel loop sooner) and
 windbench's passive wait policy, which this process runs under; the two differ most on
 small grids), each with ``baseline..._advect_seconds``: the baseline's own timing of its
 advection (first-order, four trilinear lookups per face) beside ``advect_seconds``.
-``--set`` adds variants of further overrides (column ``overrides``; ``""``: none). The variants of one resolution are stepped in turn (A, B, A, B, ...), so
-that a change in the machine's load hits them alike, and the steps are split into
+``--set`` adds variants of further overrides (column ``overrides``; ``""``: none). The
+variants of one resolution are stepped in turn (A, B, A, B, ...), so that a change in
+the machine's load hits them alike, and the steps are split into
 ``--rounds`` rounds, each followed by one run of the baseline each way: the baseline
 figures are the medians of those runs (each run's in ``baseline_rounds`` and
 ``baseline_passive_rounds``), so that a drift of the machine's speed over the minutes of
