@@ -247,7 +247,9 @@ def main():
     parser.add_argument("--checkouts", nargs="+", default=[None])
     parser.add_argument("--chunksize", type=int, default=0)
     args = parser.parse_args()
-    numba.set_parallel_chunksize(args.chunksize)
+    if args.chunksize < 0 or (args.chunksize and (args.runs or args.launchers)):
+        parser.error(f"--chunksize must be >= 0, and only without --runs and --launchers "
+                     f"(their runs are other processes), got {args.chunksize}")  # fmt: skip
     if args.runs or args.launchers:  # the last measurement of each
         table, out = (
             (separate_runs(args), RESULTS / "bench_contention_runs.csv")
@@ -258,6 +260,7 @@ def main():
         table.to_csv(out, index=False)
         print(f"wrote {out}")
         return
+    numba.set_parallel_chunksize(args.chunksize)
     rows = [measure(s if s == AUTO else int(s), args) for s in args.threads]
     table = with_one_core_ratio(pd.DataFrame(rows)).reindex(columns=FIELDS)
     print(table.to_string(index=False))
